@@ -1,0 +1,1 @@
+"""The dashboard: static pages served by the gateway (no build step)."""

@@ -1,0 +1,136 @@
+"""The columnar types that cross the stages of the pipeline, one per boundary.
+
+- ``Boxes``: one camera's 2D person detections in one frame (pixels).
+- ``Cylinders``: people as world cylinders (metres), one camera's or fused over several.
+
+Each holds numpy arrays of equal length, like supervision's ``Detections``: cheap to slice,
+concatenate and hand to vectorised code.
+
+>>> b = Boxes(xyxy=np.array([[10.0, 20.0, 50.0, 90.0]]))
+>>> len(b), b.confidence.tolist()
+(1, [1.0])
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+
+def _column(value: object, n: int, default: float, dtype: type) -> NDArray:
+    if value is None:
+        return np.full(n, default, dtype=dtype)
+    arr = np.asarray(value, dtype=dtype).reshape(-1)
+    if len(arr) != n:
+        raise ValueError(f"column has {len(arr)} rows, expected {n}")
+    return arr
+
+
+@dataclass(frozen=True, eq=False)
+class Boxes:
+    """Axis-aligned boxes ``xyxy`` (N, 4) = (x0, y0, x1, y1) in pixels, with confidences.
+
+    The paper's detection D is a 4-point rectangle; an axis-aligned box is its common case and
+    ``corners()`` gives the 4 points back."""
+
+    xyxy: FloatArray
+    confidence: FloatArray = field(default=None)  # type: ignore[assignment]
+
+    def __post_init__(self) -> None:
+        xyxy = np.asarray(self.xyxy, dtype=np.float64).reshape(-1, 4)
+        object.__setattr__(self, "xyxy", xyxy)
+        object.__setattr__(self, "confidence", _column(self.confidence, len(xyxy), 1.0, np.float64))
+
+    @classmethod
+    def empty(cls) -> Boxes:
+        return cls(xyxy=np.zeros((0, 4)))
+
+    def __len__(self) -> int:
+        return len(self.xyxy)
+
+    def __getitem__(self, index: object) -> Boxes:
+        return Boxes(xyxy=self.xyxy[index].reshape(-1, 4), confidence=self.confidence[index])
+
+    @property
+    def width(self) -> FloatArray:
+        return self.xyxy[:, 2] - self.xyxy[:, 0]
+
+    @property
+    def height(self) -> FloatArray:
+        return self.xyxy[:, 3] - self.xyxy[:, 1]
+
+    @property
+    def center(self) -> FloatArray:
+        return (self.xyxy[:, :2] + self.xyxy[:, 2:]) / 2.0
+
+    def corners(self) -> FloatArray:
+        """(N, 4, 2): top-left, top-right, bottom-right, bottom-left."""
+        x0, y0, x1, y1 = self.xyxy.T
+        return np.stack([np.stack([x0, y0], 1), np.stack([x1, y0], 1), np.stack([x1, y1], 1), np.stack([x0, y1], 1)], 1)
+
+
+@dataclass(frozen=True, eq=False)
+class Cylinders:
+    """People as upright frustum-cylinders in world metres.
+
+    ``xy`` (N, 2) is the feet position on the floor, ``height`` (N,) and ``radius`` (N,) the
+    lower radius (the upper one is a fixed fraction of it). ``camera`` (N,) is the index of the
+    camera that produced each one (−1 once fused from several), ``score`` (N,) the fit quality in
+    [0, 1] (the best IoU for a cylinder fit), and ``occluded`` (N,) marks fits rebuilt from the
+    head after a lower-body occlusion."""
+
+    xy: FloatArray
+    height: FloatArray = field(default=None)  # type: ignore[assignment]
+    radius: FloatArray = field(default=None)  # type: ignore[assignment]
+    camera: IntArray = field(default=None)  # type: ignore[assignment]
+    score: FloatArray = field(default=None)  # type: ignore[assignment]
+    occluded: NDArray[np.bool_] = field(default=None)  # type: ignore[assignment]
+
+    def __post_init__(self) -> None:
+        xy = np.asarray(self.xy, dtype=np.float64).reshape(-1, 2)
+        n = len(xy)
+        object.__setattr__(self, "xy", xy)
+        object.__setattr__(self, "height", _column(self.height, n, 1.7, np.float64))
+        object.__setattr__(self, "radius", _column(self.radius, n, 0.3, np.float64))
+        object.__setattr__(self, "camera", _column(self.camera, n, -1, np.int64))
+        object.__setattr__(self, "score", _column(self.score, n, 1.0, np.float64))
+        object.__setattr__(self, "occluded", _column(self.occluded, n, False, np.bool_))
+
+    @classmethod
+    def empty(cls) -> Cylinders:
+        return cls(xy=np.zeros((0, 2)))
+
+    def __len__(self) -> int:
+        return len(self.xy)
+
+    def __getitem__(self, index: object) -> Cylinders:
+        return Cylinders(
+            xy=self.xy[index].reshape(-1, 2),
+            height=self.height[index],
+            radius=self.radius[index],
+            camera=self.camera[index],
+            score=self.score[index],
+            occluded=self.occluded[index],
+        )
+
+    def with_camera(self, camera: int) -> Cylinders:
+        return replace(self, camera=np.full(len(self), camera, dtype=np.int64))
+
+    @staticmethod
+    def merge(parts: list[Cylinders]) -> Cylinders:
+        parts = [p for p in parts if len(p)]
+        if not parts:
+            return Cylinders.empty()
+        return Cylinders(
+            xy=np.concatenate([p.xy for p in parts]),
+            height=np.concatenate([p.height for p in parts]),
+            radius=np.concatenate([p.radius for p in parts]),
+            camera=np.concatenate([p.camera for p in parts]),
+            score=np.concatenate([p.score for p in parts]),
+            occluded=np.concatenate([p.occluded for p in parts]),
+        )
