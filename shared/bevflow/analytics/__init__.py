@@ -1,0 +1,1 @@
+"""What the tracks mean: distance violations, occupancy, crowded intervals, contacts."""

@@ -1,0 +1,1 @@
+"""End-to-end evaluation runs: datasets and simulated suites through the whole pipeline."""

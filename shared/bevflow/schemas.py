@@ -1,0 +1,198 @@
+"""Every message that crosses a process boundary, defined once.
+
+Zenoh payloads, REST bodies and websocket messages all use these models. They are frozen, reject
+unknown fields, and carry ``schema_version`` so a service can refuse a message from a newer
+release with a clear log line instead of misreading it.
+
+Conventions: world positions in metres (X, Y on the floor), times as capture timestamps in integer
+nanoseconds since the Unix epoch (``*_ns``), pixel boxes as (x0, y0, x1, y1).
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, TypeAdapter
+
+from bevflow.detections import Boxes, Cylinders
+
+SCHEMA_VERSION = 1
+
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+Xy = tuple[Finite, Finite]
+
+
+class Message(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    schema_version: Literal[1] = SCHEMA_VERSION
+
+
+# --- per camera ---------------------------------------------------------------------------------
+class FrameHeader(Message):
+    """Metadata sent beside a frame's pixels (the pixels travel as raw bytes or JPEG)."""
+
+    camera: str
+    seq: Annotated[int, Field(ge=0)]
+    capture_ns: Annotated[int, Field(ge=0)]
+    width: Annotated[int, Field(gt=0)]
+    height: Annotated[int, Field(gt=0)]
+    encoding: Literal["bgr8", "jpeg", "gray8"] = "bgr8"
+
+
+class Detections2D(Message):
+    """One camera's person boxes in one frame."""
+
+    camera: str
+    seq: Annotated[int, Field(ge=0)]
+    capture_ns: Annotated[int, Field(ge=0)]
+    boxes: list[tuple[Finite, Finite, Finite, Finite]] = Field(default_factory=list)
+    confidence: list[Annotated[float, Field(ge=0, le=1)]] = Field(default_factory=list)
+
+    def to_boxes(self) -> Boxes:
+        return Boxes(xyxy=np.asarray(self.boxes, dtype=np.float64).reshape(-1, 4), confidence=self.confidence or None)
+
+    @classmethod
+    def from_boxes(cls, camera: str, seq: int, capture_ns: int, boxes: Boxes) -> Detections2D:
+        return cls(
+            camera=camera,
+            seq=seq,
+            capture_ns=capture_ns,
+            boxes=[tuple(map(float, b)) for b in boxes.xyxy],
+            confidence=[float(c) for c in boxes.confidence],
+        )
+
+
+class CylinderEstimate(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    xy: Xy
+    height: Annotated[float, Field(gt=0, allow_inf_nan=False)]
+    radius: Annotated[float, Field(gt=0, allow_inf_nan=False)]
+    score: Annotated[float, Field(ge=0, le=1)] = 1.0
+    occluded: bool = False
+
+
+class CameraCylinders(Message):
+    """One camera's people as world cylinders in one frame."""
+
+    camera: str
+    seq: Annotated[int, Field(ge=0)]
+    capture_ns: Annotated[int, Field(ge=0)]
+    cylinders: list[CylinderEstimate] = Field(default_factory=list)
+
+    def to_cylinders(self, camera_index: int) -> Cylinders:
+        c = self.cylinders
+        return Cylinders(
+            xy=np.asarray([e.xy for e in c], dtype=np.float64).reshape(-1, 2),
+            height=[e.height for e in c],
+            radius=[e.radius for e in c],
+            camera=[camera_index] * len(c),
+            score=[e.score for e in c],
+            occluded=[e.occluded for e in c],
+        )
+
+    @classmethod
+    def from_cylinders(cls, camera: str, seq: int, capture_ns: int, cyl: Cylinders) -> CameraCylinders:
+        finite = np.isfinite(cyl.xy).all(axis=1)
+        return cls(
+            camera=camera,
+            seq=seq,
+            capture_ns=capture_ns,
+            cylinders=[
+                CylinderEstimate(
+                    xy=(float(cyl.xy[i, 0]), float(cyl.xy[i, 1])),
+                    height=float(cyl.height[i]),
+                    radius=float(cyl.radius[i]),
+                    score=float(np.clip(cyl.score[i], 0.0, 1.0)),
+                    occluded=bool(cyl.occluded[i]),
+                )
+                for i in np.flatnonzero(finite)
+            ],
+        )
+
+
+# --- site-wide, from the tracker ------------------------------------------------------------------
+class TrackState(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    id: int
+    xy: Xy
+    velocity: Xy = (0.0, 0.0)
+    height: Annotated[float, Field(gt=0, allow_inf_nan=False)] = 1.7
+    radius: Annotated[float, Field(gt=0, allow_inf_nan=False)] = 0.3
+    cameras: list[str] = Field(default_factory=list, description="cameras that saw this person in this tick")
+    zones: list[str] = Field(default_factory=list)
+
+
+class Tracks(Message):
+    """All active tracks of the site at one tick."""
+
+    site: str
+    time_ns: Annotated[int, Field(ge=0)]
+    tracks: list[TrackState] = Field(default_factory=list)
+    violations: list[tuple[int, int]] = Field(default_factory=list, description="pairs closer than the limit now")
+
+
+class ZoneOccupancy(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    id: str
+    name: str = ""
+    count: Annotated[int, Field(ge=0)]
+    capacity: Annotated[int, Field(ge=0)] | None = None
+
+
+class Occupancy(Message):
+    site: str
+    time_ns: Annotated[int, Field(ge=0)]
+    total: Annotated[int, Field(ge=0)]
+    capacity: Annotated[int, Field(ge=0)] | None = None
+    zones: list[ZoneOccupancy] = Field(default_factory=list)
+
+
+# --- events --------------------------------------------------------------------------------------
+class EventBase(Message):
+    """An alert. ``start_ns`` is when the condition began; ``end_ns`` is set once it is over, and the
+    same ``id`` is published again then, so subscribers can update the alert in place."""
+
+    id: str
+    start_ns: Annotated[int, Field(ge=0)]
+    end_ns: Annotated[int, Field(ge=0)] | None = None
+    zone: str | None = None
+    tracks: list[int] = Field(default_factory=list)
+
+
+class DistanceViolation(EventBase):
+    type: Literal["distance_violation"] = "distance_violation"
+    min_distance_m: Annotated[float, Field(ge=0, allow_inf_nan=False)]
+    limit_m: Annotated[float, Field(gt=0)]
+    position: Xy | None = Field(default=None, description="midpoint of the pair at the closest approach")
+
+
+class OverCapacity(EventBase):
+    type: Literal["over_capacity"] = "over_capacity"
+    capacity: Annotated[int, Field(ge=0)]
+    peak: Annotated[int, Field(ge=0)]
+
+
+class CalibrationDrift(EventBase):
+    type: Literal["calibration_drift"] = "calibration_drift"
+    camera: str
+    shift_m: Annotated[float, Field(ge=0, allow_inf_nan=False)]
+    reference_camera: str | None = None
+
+
+class CameraHealthEvent(EventBase):
+    type: Literal["camera_down", "camera_up"]
+    camera: str
+    reason: str = ""
+
+
+Event = Annotated[
+    DistanceViolation | OverCapacity | CalibrationDrift | CameraHealthEvent,
+    Field(discriminator="type"),
+]
+EVENT_ADAPTER: TypeAdapter[Event] = TypeAdapter(Event)
+EVENT_TYPES: tuple[str, ...] = ("distance_violation", "over_capacity", "calibration_drift", "camera_down", "camera_up")
+
+
+def decode_event(payload: bytes | str) -> Event:
+    return EVENT_ADAPTER.validate_json(payload)

@@ -1,0 +1,1 @@
+"""The one world tracker that follows every person across the site."""
