@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Literal
 
 import cv2
@@ -148,6 +149,9 @@ class Camera:
         """The same camera with its image resized by ``factor`` (as the detector's input is)."""
         K = self.K.copy()
         K[:2, :] *= factor
+        # Pixel centres sit at integer coordinates, so a resize maps u to (u + 0.5)·factor − 0.5
+        # (as cv2.resize does); scaling cx, cy alone would shift the image by half a pixel.
+        K[:2, 2] += 0.5 * factor - 0.5
         w, h = self.image_size
         size = (int(round(w * factor)), int(round(h * factor)))
         return type(self)(K=K, dist=self.dist, R=self.R, t=self.t, image_size=size)
@@ -179,21 +183,34 @@ class FisheyeCamera(Camera):
         t = -R @ np.asarray(position, dtype=np.float64)
         return cls(K=K, dist=np.asarray(dist), R=R, t=t, image_size=image_size)
 
+    @cached_property
+    def max_theta(self) -> float:
+        """The largest angle off the optical axis (radians, at most π) up to which θd(θ) keeps
+        growing. Beyond it the polynomial folds back: far points would land on the image again,
+        and no pixel could be traced back to them, so ``project`` and ``rays`` stop there."""
+        k1, k2, k3, k4 = self.dist
+        # dθd/dθ = 1 + 3k1 s + 5k2 s² + 7k3 s³ + 9k4 s⁴ with s = θ²; its first positive root ends the lens.
+        return math.sqrt(_first_positive_root([1.0, 3 * k1, 5 * k2, 7 * k3, 9 * k4], limit=math.pi**2))
+
     def distort_theta(self, theta: Array) -> Array:
         k1, k2, k3, k4 = self.dist
         t2 = theta * theta
         return theta * (1.0 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))))
 
-    def undistort_theta(self, theta_d: Array, iterations: int = 12) -> Array:
-        """Invert θd = θ(1 + k1θ² + …) by Newton's method, vectorised (OpenCV iterates too)."""
+    def undistort_theta(self, theta_d: Array, iterations: int = 20) -> Array:
+        """Invert θd = θ(1 + k1θ² + …) on [0, max_theta] by Newton's method, vectorised (OpenCV
+        iterates too). NaN where θd is beyond what the lens reaches or Newton did not converge."""
         k1, k2, k3, k4 = self.dist
-        theta = np.array(theta_d, dtype=np.float64, copy=True)
+        theta_d = np.asarray(theta_d, dtype=np.float64)
+        top = self.max_theta
+        theta = np.clip(theta_d, 0.0, top)
         for _ in range(iterations):
             t2 = theta * theta
             f = theta * (1.0 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4)))) - theta_d
             df = 1.0 + t2 * (3 * k1 + t2 * (5 * k2 + t2 * (7 * k3 + t2 * 9 * k4)))
-            theta -= f / np.where(np.abs(df) < 1e-12, 1e-12, df)
-        return theta
+            theta = np.clip(theta - f / np.where(np.abs(df) < 1e-12, 1e-12, df), 0.0, top)
+        converged = np.abs(self.distort_theta(theta) - theta_d) <= 1e-9 * np.maximum(1.0, np.abs(theta_d))
+        return np.where(converged, theta, np.nan)
 
     def project_directions(self, xc: Array) -> Array:
         xc = np.asarray(xc, dtype=np.float64).reshape(-1, 3)
@@ -208,10 +225,15 @@ class FisheyeCamera(Camera):
         u = K[0, 0] * x + K[0, 1] * y + K[0, 2]
         v = K[1, 1] * y + K[1, 2]
         out = np.stack([u, v], axis=1)
-        out[np.linalg.norm(xc, axis=1) < 1e-12] = np.nan
+        # Unseen: anything past the fold of the lens polynomial, the zero vector, and the direction
+        # straight behind the camera (every azimuth at once, so no single pixel).
+        unseen = (theta > self.max_theta) | ((rxy <= 1e-12) & (xc[:, 2] <= 1e-12))
+        out[unseen] = np.nan
         return out
 
     def rays(self, pixels: Array) -> Array:
+        """Pixels (N, 2) to unit ray directions (N, 3) in the camera frame; NaN for pixels beyond
+        the lens's reach (outside the image circle of a distortion polynomial that folds back)."""
         p = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
         K = self.K
         y = (p[:, 1] - K[1, 2]) / K[1, 1]
@@ -219,8 +241,16 @@ class FisheyeCamera(Camera):
         theta_d = np.hypot(x, y)
         theta = self.undistort_theta(theta_d)
         with np.errstate(divide="ignore", invalid="ignore"):
-            s = np.where(theta_d > 1e-12, np.sin(theta) / theta_d, 1.0)
+            s = np.where(theta_d <= 1e-12, 1.0, np.sin(theta) / theta_d)  # NaN pixels stay NaN
         return np.stack([x * s, y * s, np.cos(theta)], axis=1)
+
+
+def _first_positive_root(coefficients: list[float], limit: float) -> float:
+    """The smallest real root in (0, limit] of the polynomial c0 + c1 s + c2 s² + …, else ``limit``."""
+    roots = np.polynomial.polynomial.polyroots(np.trim_zeros(np.asarray(coefficients, dtype=np.float64), "b"))
+    real = roots[np.abs(roots.imag) <= 1e-9 * np.maximum(1.0, np.abs(roots.real))].real
+    real = real[(real > 0) & (real <= limit)]
+    return float(real.min()) if len(real) else limit
 
 
 @dataclass(frozen=True, eq=False)
@@ -232,26 +262,74 @@ class PinholeCamera(Camera):
         if self.dist.size not in (0, 4, 5, 8):
             raise ValueError(f"pinhole distortion needs 0, 4, 5 or 8 coefficients, got {self.dist.size}")
 
+    @cached_property
+    def max_radius(self) -> float:
+        """The largest normalised radius r = |(X/Z, Y/Z)| up to which the radial distortion keeps
+        pushing points outward (∞ if it always does). Past it a calibrated polynomial folds back,
+        so points far outside the field of view would land inside the image; ``project`` and
+        ``rays`` stop there. (The small tangential terms are left out of this limit.)"""
+        d = np.zeros(8)
+        d[: self.dist.size] = self.dist
+        k1, k2, _, _, k3, k4, k5, k6 = d
+        P = np.polynomial.Polynomial
+        num, den = P([1.0, k1, k2, k3]), P([1.0, k4, k5, k6])  # radial factor num(s)/den(s), s = r²
+        s = P([0.0, 1.0])
+        # d/dr [r·num/den] = [(num + 2s·num')·den − 2s·num·den'] / den²;
+        # its first zero, or a pole of den, ends the field.
+        slope = (num + 2 * s * num.deriv()) * den - 2 * s * num * den.deriv()
+        limit = 1e12
+        end = min(_first_positive_root(list(slope.coef), limit), _first_positive_root(list(den.coef), limit))
+        return math.sqrt(end) if end < limit else math.inf
+
     def project_directions(self, xc: Array) -> Array:
         xc = np.asarray(xc, dtype=np.float64).reshape(-1, 3)
         out = np.full((len(xc), 2), np.nan)
         front = xc[:, 2] > 1e-9
+        with np.errstate(divide="ignore", invalid="ignore"):
+            front &= np.hypot(xc[:, 0], xc[:, 1]) <= self.max_radius * xc[:, 2]
         if front.any():
             pts, _ = cv2.projectPoints(xc[front], np.zeros(3), np.zeros(3), self.K, self.dist)
             out[front] = pts.reshape(-1, 2)
         return out
 
     def rays(self, pixels: Array) -> Array:
+        """Pixels (N, 2) to unit ray directions (N, 3) in the camera frame; NaN for pixels no
+        point in the valid field projects to."""
         p = np.asarray(pixels, dtype=np.float64).reshape(-1, 1, 2)
         if len(p) == 0:
             return np.zeros((0, 3))
-        ab = cv2.undistortPoints(p, self.K, self.dist).reshape(-1, 2)
+        # OpenCV's default stops after 5 fixed-point steps, which leaves pixels of error with real
+        # distortion; iterate to convergence instead.
+        ab = cv2.undistortPoints(p, self.K, self.dist, criteria=_UNDISTORT_CRITERIA).reshape(-1, 2)
         d = np.concatenate([ab, np.ones((len(ab), 1))], axis=1)
-        return d / np.linalg.norm(d, axis=1, keepdims=True)
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        if self.dist.any():
+            # The iteration has no solution past the fold of the polynomial: check it by reprojecting.
+            back = self.project_directions(d)
+            d[~(np.linalg.norm(back - p.reshape(-1, 2), axis=1) <= 1e-4)] = np.nan
+        return d
+
+    def nadir_pixel(self) -> Array:
+        """As ``Camera.nadir_pixel``, but always finite: a tilted or level pinhole camera gets a
+        point below its image (its undistorted vanishing point of verticals, or a far point)."""
+        down = self.R @ np.array([0.0, 0.0, -1.0])
+        pixel = self.project_directions(down[None, :])[0]
+        if np.isfinite(pixel).all():
+            return pixel
+        K = self.K
+        if down[2] > 1e-9:
+            # The vanishing point lies outside the calibrated field, where the distortion polynomial
+            # means nothing; the undistorted projection is what "below the image" needs.
+            return (K @ (down / down[2]))[:2]
+        # Level or upward-looking camera: verticals meet at infinity, so return a point far along
+        # the image direction of "down".
+        direction = K[:2, :2] @ down[:2]
+        return K[:2, 2] + 1e7 * direction / max(float(np.linalg.norm(direction)), 1e-12)
 
 
-def make_camera(
-    kind: CameraKind, K: Array, dist: Array, R: Array, t: Array, image_size: tuple[int, int]
-) -> Camera:
+_UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-14)
+
+
+def make_camera(kind: CameraKind, K: Array, dist: Array, R: Array, t: Array, image_size: tuple[int, int]) -> Camera:
     cls = FisheyeCamera if kind == "fisheye" else PinholeCamera
     return cls(K=K, dist=dist, R=R, t=t, image_size=image_size)

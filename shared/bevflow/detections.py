@@ -22,12 +22,25 @@ FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
 
-def _column(value: object, n: int, default: float, dtype: type) -> NDArray:
+def _column(name: str, value: object, n: int, default: float, dtype: type) -> NDArray:
     if value is None:
         return np.full(n, default, dtype=dtype)
     arr = np.asarray(value, dtype=dtype).reshape(-1)
     if len(arr) != n:
-        raise ValueError(f"column has {len(arr)} rows, expected {n}")
+        raise ValueError(f"{name}: column has {len(arr)} rows, expected {n}")
+    return arr
+
+
+def _rows(name: str, value: object, width: int) -> FloatArray:
+    """An (N, width) float array; an empty input is zero rows and a flat row of ``width`` is one.
+    Anything else is refused rather than reshaped into wrong rows."""
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.size == 0:
+        return arr.reshape(0, width)
+    if arr.shape == (width,):
+        return arr.reshape(1, width)
+    if arr.ndim != 2 or arr.shape[1] != width:
+        raise ValueError(f"{name} must have shape (N, {width}), got {arr.shape}")
     return arr
 
 
@@ -42,9 +55,9 @@ class Boxes:
     confidence: FloatArray = field(default=None)  # type: ignore[assignment]
 
     def __post_init__(self) -> None:
-        xyxy = np.asarray(self.xyxy, dtype=np.float64).reshape(-1, 4)
+        xyxy = _rows("xyxy", self.xyxy, 4)
         object.__setattr__(self, "xyxy", xyxy)
-        object.__setattr__(self, "confidence", _column(self.confidence, len(xyxy), 1.0, np.float64))
+        object.__setattr__(self, "confidence", _column("confidence", self.confidence, len(xyxy), 1.0, np.float64))
 
     @classmethod
     def empty(cls) -> Boxes:
@@ -54,7 +67,7 @@ class Boxes:
         return len(self.xyxy)
 
     def __getitem__(self, index: object) -> Boxes:
-        return Boxes(xyxy=self.xyxy[index].reshape(-1, 4), confidence=self.confidence[index])
+        return Boxes(xyxy=self.xyxy[index].reshape(-1, 4), confidence=np.atleast_1d(self.confidence[index]))
 
     @property
     def width(self) -> FloatArray:
@@ -67,6 +80,15 @@ class Boxes:
     @property
     def center(self) -> FloatArray:
         return (self.xyxy[:, :2] + self.xyxy[:, 2:]) / 2.0
+
+    @staticmethod
+    def merge(parts: list[Boxes]) -> Boxes:
+        parts = [p for p in parts if len(p)]
+        if not parts:
+            return Boxes.empty()
+        return Boxes(
+            xyxy=np.concatenate([p.xyxy for p in parts]), confidence=np.concatenate([p.confidence for p in parts])
+        )
 
     def corners(self) -> FloatArray:
         """(N, 4, 2): top-left, top-right, bottom-right, bottom-left."""
@@ -92,14 +114,14 @@ class Cylinders:
     occluded: NDArray[np.bool_] = field(default=None)  # type: ignore[assignment]
 
     def __post_init__(self) -> None:
-        xy = np.asarray(self.xy, dtype=np.float64).reshape(-1, 2)
+        xy = _rows("xy", self.xy, 2)
         n = len(xy)
         object.__setattr__(self, "xy", xy)
-        object.__setattr__(self, "height", _column(self.height, n, 1.7, np.float64))
-        object.__setattr__(self, "radius", _column(self.radius, n, 0.3, np.float64))
-        object.__setattr__(self, "camera", _column(self.camera, n, -1, np.int64))
-        object.__setattr__(self, "score", _column(self.score, n, 1.0, np.float64))
-        object.__setattr__(self, "occluded", _column(self.occluded, n, False, np.bool_))
+        object.__setattr__(self, "height", _column("height", self.height, n, 1.7, np.float64))
+        object.__setattr__(self, "radius", _column("radius", self.radius, n, 0.3, np.float64))
+        object.__setattr__(self, "camera", _column("camera", self.camera, n, -1, np.int64))
+        object.__setattr__(self, "score", _column("score", self.score, n, 1.0, np.float64))
+        object.__setattr__(self, "occluded", _column("occluded", self.occluded, n, False, np.bool_))
 
     @classmethod
     def empty(cls) -> Cylinders:

@@ -18,7 +18,7 @@ from typing import Annotated, Any, Literal
 
 import numpy as np
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator, model_validator
 
 from bevflow.camera import Camera, make_camera, rotation_from_ypr
 
@@ -26,7 +26,8 @@ PositiveFloat = Annotated[float, Field(gt=0)]
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # A site file never needs .inf or .nan; they would only surface later as NaN positions.
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 class Intrinsics(_Strict):
@@ -69,15 +70,24 @@ class CameraConfig(_Strict):
     source: str | None = Field(default=None, description="stream URL, video file or image folder")
     detector: str | None = Field(default=None, description="detector model name; default by height")
 
+    @field_validator("distortion")
+    @classmethod
+    def _distortion_fits_model(cls, distortion: list[float], info: ValidationInfo) -> list[float]:
+        model, n = info.data.get("model"), len(distortion)
+        if model == "fisheye" and n != 4:
+            raise ValueError(f"a fisheye camera needs 4 coefficients k1..k4, got {n}")
+        if model == "pinhole" and n not in (0, 4, 5, 8):
+            raise ValueError(
+                f"a pinhole camera needs 0, 4, 5 or 8 coefficients (k1, k2, p1, p2[, k3[, k4, k5, k6]]), got {n}"
+            )
+        return distortion
+
     @model_validator(mode="after")
     def _one_pose(self) -> CameraConfig:
-        if (self.pose is None) == (self.extrinsics is None):
-            raise ValueError("give exactly one of 'pose' (position and angles) or 'extrinsics' (rvec, tvec)")
-        n = len(self.distortion)
-        if self.model == "fisheye" and n != 4:
-            raise ValueError(f"a fisheye camera needs 4 distortion coefficients k1..k4, got {n}")
-        if self.model == "pinhole" and n not in (0, 4, 5, 8):
-            raise ValueError(f"a pinhole camera needs 0, 4, 5 or 8 distortion coefficients, got {n}")
+        if self.pose is None and self.extrinsics is None:
+            raise ValueError("no 'pose' (position and angles) or 'extrinsics' (rvec, tvec); give one of them")
+        if self.pose is not None and self.extrinsics is not None:
+            raise ValueError("both 'pose' and 'extrinsics' are given; keep only one of them")
         return self
 
     def build(self) -> Camera:
@@ -147,23 +157,64 @@ class Site(_Strict):
         default=None, description="floor extent (xmin, ymin, xmax, ymax) in metres, for maps"
     )
 
-    @model_validator(mode="after")
-    def _unique_ids(self) -> Site:
-        for kind, ids in (("camera", [c.id for c in self.cameras]), ("zone", [z.id for z in self.zones])):
-            dup = sorted({i for i in ids if ids.count(i) > 1})
-            if dup:
-                raise ValueError(f"{kind} ids must be unique; repeated: {', '.join(dup)}")
-        return self
+    @field_validator("cameras", "zones")
+    @classmethod
+    def _unique_ids(cls, items: list[CameraConfig] | list[Zone], info: ValidationInfo) -> list[Any]:
+        where: dict[str, list[int]] = {}
+        for i, item in enumerate(items):
+            where.setdefault(item.id, []).append(i)
+        repeated = [
+            f"id {i!r} is used by {' and '.join(f'{info.field_name}[{k}]' for k in at)}"
+            for i, at in where.items()
+            if len(at) > 1
+        ]
+        if repeated:
+            raise ValueError(f"ids must be unique; {'; '.join(repeated)}")
+        return items
+
+    @field_validator("floor")
+    @classmethod
+    def _floor_has_area(
+        cls, floor: tuple[float, float, float, float] | None
+    ) -> tuple[float, float, float, float] | None:
+        if floor is not None and not (floor[2] > floor[0] and floor[3] > floor[1]):
+            raise ValueError(f"expected (xmin, ymin, xmax, ymax) with xmax > xmin and ymax > ymin, got {list(floor)}")
+        return floor
 
     @cached_property
     def built_cameras(self) -> dict[str, Camera]:
+        """Camera models by id, in file order; built once per site object."""
         return {c.id: c.build() for c in self.cameras}
 
+    def model_copy(self, *, update: dict[str, Any] | None = None, deep: bool = False) -> Site:
+        """As pydantic's, but without the cached camera models, which ``update`` may outdate."""
+        copy = super().model_copy(update=update, deep=deep)
+        for name in _CACHED:
+            copy.__dict__.pop(name, None)
+        return copy
+
+    @cached_property
+    def camera_ids(self) -> list[str]:
+        """Camera ids in file order; a camera's position here is its index in ``Cylinders.camera``."""
+        return [c.id for c in self.cameras]
+
     def camera(self, camera_id: str) -> Camera:
+        """The built camera model of ``camera_id``; KeyError naming the known ids otherwise."""
+        if camera_id not in self.built_cameras:
+            raise KeyError(self._unknown(camera_id))
         return self.built_cameras[camera_id]
 
     def camera_index(self, camera_id: str) -> int:
-        return [c.id for c in self.cameras].index(camera_id)
+        """Position of ``camera_id`` in ``cameras``; ValueError naming the known ids otherwise."""
+        if camera_id not in self.camera_ids:
+            raise ValueError(self._unknown(camera_id))
+        return self.camera_ids.index(camera_id)
+
+    def _unknown(self, camera_id: str) -> str:
+        return f"site {self.site!r} has no camera {camera_id!r}; its cameras are {', '.join(self.camera_ids)}"
+
+
+_CACHED = ("built_cameras", "camera_ids")
 
 
 class SiteError(ValueError):
@@ -183,17 +234,32 @@ def parse_site(text: str, source: str = "<site>", fmt: Literal["yaml", "json"] =
     try:
         raw = json.loads(text) if fmt == "json" else yaml.safe_load(text)
     except (json.JSONDecodeError, yaml.YAMLError) as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        if isinstance(exc, json.JSONDecodeError):
-            where = f" at line {exc.lineno}, column {exc.colno}"
-        raise SiteError(f"{source}: not valid {fmt.upper()}{where}") from None
+        raise SiteError(f"{source}: not valid {fmt.upper()}{_syntax_error_place(exc)}") from None
+    if raw is None:
+        raise SiteError(f"{source}: the file is empty; a site needs at least a 'cameras' list")
     if not isinstance(raw, dict):
-        raise SiteError(f"{source}: expected a mapping with 'cameras' at the top, got {type(raw).__name__}")
+        raise SiteError(f"{source}: expected a mapping with 'cameras' at the top, got a {type(raw).__name__}")
     try:
         return Site.model_validate(raw)
     except ValidationError as exc:
         raise SiteError("\n".join(_describe(source, raw, err) for err in exc.errors())) from None
+
+
+def _syntax_error_place(exc: json.JSONDecodeError | yaml.YAMLError) -> str:
+    if isinstance(exc, json.JSONDecodeError):
+        return f" at line {exc.lineno}, column {exc.colno}: {exc.msg}"
+    mark = getattr(exc, "problem_mark", None)
+    where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+    problem = getattr(exc, "problem", None)
+    return f"{where}: {problem}" if problem else where
+
+
+# pydantic's wording, where a technician needs something plainer.
+_PLAIN_MESSAGES = {
+    "extra_forbidden": "unknown field (misspelt, or in the wrong section?)",
+    "string_pattern_mismatch": "use only letters, digits, '_', '.' and '-'",
+    "finite_number": "must be a finite number",
+}
 
 
 def _describe(source: str, raw: dict[str, Any], err: Any) -> str:
@@ -211,7 +277,10 @@ def _describe(source: str, raw: dict[str, Any], err: Any) -> str:
             parts.append(("." if parts else "") + str(loc))
             node = node.get(loc) if isinstance(node, dict) else None
     field = "".join(parts) or "(top level)"
-    return f"{source}: {field}: {err['msg']}"
+    message = _PLAIN_MESSAGES.get(err["type"], err["msg"])
+    if err["type"] == "value_error":
+        message = str(err.get("ctx", {}).get("error", message))  # without pydantic's "Value error, "
+    return f"{source}: {field}: {message}"
 
 
 def dump_site(site: Site) -> str:
