@@ -4,10 +4,15 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
+# Our matrix products are small and many; OpenBLAS's thread pool made one of them 40x slower on a
+# busy 2-core machine. Set before numpy is first imported (the subcommand modules import it).
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
 # Subcommand modules, in the order ``bevflow --help`` lists them.
-COMMANDS = ["evaluate"]
+COMMANDS = ["evaluate", "serve"]
 
 
 def build_parser() -> argparse.ArgumentParser:
