@@ -1,0 +1,171 @@
+"""The gateway's FastAPI application: REST routes, websockets, the dashboard, and the 3D view.
+
+``create_app`` needs only a site and a ``GatewayState``; it knows nothing of the bus, so tests
+feed the state directly and ``main`` feeds it from Zenoh.
+
+>>> from bevflow_services.gateway import GatewayState, create_app  # doctest: +SKIP
+>>> app = create_app(site, GatewayState(site))                        # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import AsyncIterator, Callable
+from contextlib import AbstractAsyncContextManager, asynccontextmanager
+from pathlib import Path
+from typing import Any
+
+from fastapi import FastAPI, Request
+from fastapi.encoders import jsonable_encoder
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import FileResponse, HTMLResponse, JSONResponse
+from fastapi.staticfiles import StaticFiles
+from pydantic import TypeAdapter
+
+import bevflow_dashboard
+from bevflow.schemas import AlertMessage, Tracks
+from bevflow.site import Site
+
+from bevflow_services.gateway.routes import alerts, cameras, health, intervals, occupancy, streams, tracks
+from bevflow_services.gateway.routes import site as site_routes
+from bevflow_services.gateway.state import GatewayState
+
+log = logging.getLogger(__name__)
+
+DASHBOARD_DIR = Path(bevflow_dashboard.__file__).resolve().parent
+API_VERSION = "1"
+
+PLACEHOLDER = """<!doctype html>
+<html lang="en"><head><meta charset="utf-8"><title>bevflow</title></head>
+<body style="font-family: sans-serif; margin: 2em">
+<h1>bevflow gateway</h1>
+<p>The dashboard is not installed here. The API is running:</p>
+<ul>
+<li><a href="/api/occupancy">/api/occupancy</a>, <a href="/api/health">/api/health</a>,
+<a href="/api/cameras">/api/cameras</a>, <a href="/api/site">/api/site</a></li>
+<li><a href="/docs">/docs</a>: every route, with its parameters</li>
+</ul>
+</body></html>
+"""
+
+WEBSOCKETS_DOC = {
+    "/ws/alerts": {
+        "description": "One AlertMessage per text frame, when an alert starts and again when it ends (same id).",
+        "query": {
+            "types": "comma-separated alert types to receive (default: all)",
+            "zones": "comma-separated zone ids to receive (default: all, including site-wide alerts)",
+            "replay": "'active' to first receive the alerts already ongoing (default: 'none')",
+        },
+        "message": {"$ref": "#/components/schemas/AlertMessage"},
+    },
+    "/ws/tracks": {
+        "description": "One Tracks message per tracker tick, starting with the latest one.",
+        "query": {},
+        "message": {"$ref": "#/components/schemas/Tracks"},
+    },
+}
+
+
+def create_app(
+    site: Site,
+    state: GatewayState,
+    *,
+    dashboard_dir: Path | None = None,
+    view3d_port: int | None = None,
+    view3d_host: str = "127.0.0.1",
+    view3d_rate_hz: float = 5.0,
+    feed: Callable[[], AbstractAsyncContextManager[object]] | None = None,
+) -> FastAPI:
+    """The gateway application for ``site``, reading ``state``.
+
+    Args:
+        dashboard_dir: folder served at ``/`` (default: the installed dashboard); ``/`` shows a
+            placeholder page while it has no ``index.html``.
+        view3d_port: port of the viser 3D view, started with the app's lifespan; None: no 3D view.
+        feed: entered for the app's lifespan, after the 3D view starts: what feeds ``state``
+            (``main`` passes the bus subscriptions).
+    """
+    if state.site is not site and state.site != site:
+        raise ValueError(f"the state is for site {state.site.site!r}, not {site.site!r}")
+    dashboard = dashboard_dir or DASHBOARD_DIR
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        view = None
+        if view3d_port is not None:
+            from bevflow_services.gateway.view3d import View3D
+
+            view = View3D(state, host=view3d_host, port=view3d_port, rate_hz=view3d_rate_hz)
+            view.start()
+            app.state.view3d_port = view.port
+        try:
+            if feed is None:
+                yield
+            else:
+                async with feed():
+                    yield
+        finally:
+            if view is not None:
+                view.stop()
+            app.state.view3d_port = None
+
+    app = FastAPI(
+        title="bevflow gateway",
+        version=API_VERSION,
+        summary="Live occupancy, distance alerts and tracks of one site, from ceiling cameras.",
+        description=(
+            "Units are metres and seconds; `*_ns` fields are capture times in nanoseconds since the Unix epoch, "
+            "other times are ISO-8601 UTC. Websockets (not listed as paths): `/ws/alerts` and `/ws/tracks`; "
+            "see `x-websockets`."
+        ),
+        lifespan=lifespan,
+    )
+    app.state.gateway = state
+    app.state.view3d_port = None
+    app.state.history_s = getattr(state.history, "retention_ns", 3600 * 10**9) / 1e9
+
+    for module in (occupancy, intervals, tracks, alerts, cameras, health, site_routes, streams):
+        app.include_router(module.router)
+    app.add_exception_handler(RequestValidationError, _validation_error)
+    _serve_dashboard(app, dashboard)
+    app.openapi = lambda: _openapi(app)  # type: ignore[method-assign]
+    return app
+
+
+async def _validation_error(request: Request, exc: Exception) -> JSONResponse:
+    """FastAPI's 422 body, plus one ``message`` line naming the first bad parameter."""
+    assert isinstance(exc, RequestValidationError)
+    errors = exc.errors()
+    first = errors[0] if errors else {"loc": (), "msg": "invalid request"}
+    where = ".".join(str(p) for p in first["loc"][1:]) or "request"
+    kind = first["loc"][0] if first["loc"] else "request"
+    message = f"{kind} parameter {where}: {first['msg']}"
+    return JSONResponse(status_code=422, content={"message": message, "detail": jsonable_encoder(errors)})
+
+
+def _serve_dashboard(app: FastAPI, folder: Path) -> None:
+    @app.get("/", include_in_schema=False)
+    def index() -> Any:
+        page = folder / "index.html"
+        return FileResponse(page) if page.is_file() else HTMLResponse(PLACEHOLDER)
+
+    # Last, so it only answers paths no route claimed (the dashboard's scripts and styles).
+    app.mount("/", StaticFiles(directory=folder, check_dir=False), name="dashboard")
+
+
+def _openapi(app: FastAPI) -> dict[str, Any]:
+    """FastAPI's spec, plus the websocket message schemas (websocket routes are not in OpenAPI)."""
+    if app.openapi_schema is not None:
+        return app.openapi_schema
+    from fastapi.openapi.utils import get_openapi
+
+    spec = get_openapi(title=app.title, version=app.version, summary=app.summary, description=app.description, routes=app.routes)
+    schemas = spec.setdefault("components", {}).setdefault("schemas", {})
+    for name, model in (("AlertMessage", AlertMessage), ("Tracks", Tracks)):
+        model_schema = TypeAdapter(model).json_schema(ref_template="#/components/schemas/{model}")
+        for def_name, definition in model_schema.pop("$defs", {}).items():
+            schemas.setdefault(def_name, definition)
+        schemas.setdefault(name, model_schema)
+    spec["x-websockets"] = WEBSOCKETS_DOC
+    app.openapi_schema = spec
+    return spec

@@ -1,0 +1,1 @@
+"""One router per resource: occupancy, intervals, tracks, alerts, cameras, health, site, streams."""

@@ -1,0 +1,81 @@
+"""``/api/violations`` and ``/api/alerts``: distance violations and every other alert, past and active."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, Query
+
+from bevflow.schemas import EVENT_TYPES, AlertMessage
+
+from bevflow_services.gateway.history import EventQuery
+from bevflow_services.gateway.params import (
+    Limit,
+    Offset,
+    Page,
+    SiteDep,
+    StateDep,
+    TimeRangeDep,
+    ZoneParam,
+    check_zone,
+    split_csv,
+)
+
+router = APIRouter(prefix="/api", tags=["alerts"])
+
+TrackParam = Annotated[int | None, Query(ge=0, description="only alerts that involve this track id")]
+ActiveParam = Annotated[bool | None, Query(description="true: only ongoing alerts; false: only ended ones")]
+TypesParam = Annotated[str | None, Query(description=f"comma-separated alert types: {', '.join(EVENT_TYPES)}")]
+
+
+def _page(state: StateDep, query: EventQuery, limit: int, offset: int) -> Page[AlertMessage]:
+    events, total = state.history.events(query, limit, offset)
+    return Page[AlertMessage](items=[AlertMessage.from_event(e) for e in events], total=total, limit=limit, offset=offset)
+
+
+@router.get("/violations", response_model=Page[AlertMessage], summary="Distance violations, newest first")
+def violations(
+    state: StateDep,
+    site: SiteDep,
+    window: TimeRangeDep,
+    zone: ZoneParam = None,
+    track: TrackParam = None,
+    active: ActiveParam = None,
+    limit: Limit = 100,
+    offset: Offset = 0,
+) -> Page[AlertMessage]:
+    """Pairs of people closer than the social-distance limit for longer than the minimum duration.
+    A violation overlapping [since, until] is listed; ``event.min_distance_m`` is the closest approach."""
+    query = EventQuery(
+        types=frozenset({"distance_violation"}),
+        zone=check_zone(site, zone),
+        track=track,
+        active=active,
+        since_ns=window.since_ns,
+        until_ns=window.until_ns,
+    )
+    return _page(state, query, limit, offset)
+
+
+@router.get("/alerts", response_model=Page[AlertMessage], summary="Alerts of every type, newest first")
+def alerts(
+    state: StateDep,
+    site: SiteDep,
+    window: TimeRangeDep,
+    types: TypesParam = None,
+    zone: ZoneParam = None,
+    track: TrackParam = None,
+    active: ActiveParam = None,
+    limit: Limit = 100,
+    offset: Offset = 0,
+) -> Page[AlertMessage]:
+    """The same objects ``/ws/alerts`` sends, for filling an alert feed when a page opens."""
+    query = EventQuery(
+        types=split_csv(types, "types", EVENT_TYPES),
+        zone=check_zone(site, zone),
+        track=track,
+        active=active,
+        since_ns=window.since_ns,
+        until_ns=window.until_ns,
+    )
+    return _page(state, query, limit, offset)

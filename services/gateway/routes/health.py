@@ -1,0 +1,71 @@
+"""``/api/health``: which services are alive, and whether data is flowing."""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from fastapi import APIRouter, Request
+from pydantic import BaseModel, Field
+
+from bevflow.schemas import iso_utc
+
+from bevflow_services.gateway.params import StateDep
+
+router = APIRouter(prefix="/api", tags=["health"])
+
+STALE_AFTER_S = 5.0
+Status = Literal["ok", "degraded", "stale", "no_data"]
+
+
+class ServiceStatus(BaseModel):
+    name: str = Field(description="ingest, detector, projector, tracker, gateway, ...")
+    instance: str
+    since: str = Field(description="when the gateway first saw it alive, ISO-8601 UTC")
+
+
+class CameraCounts(BaseModel):
+    up: int
+    down: int
+    unknown: int
+
+
+class Health(BaseModel):
+    status: Status = Field(
+        description="no_data: no tracks yet; stale: no tracks for a while; degraded: a camera is down; ok otherwise"
+    )
+    site: str
+    time: str
+    uptime_s: float
+    tracks_age_s: float | None = Field(description="seconds since the latest tracks message arrived")
+    services: list[ServiceStatus] = Field(description="every service whose liveliness token is present")
+    cameras: CameraCounts
+    ignored_messages: int = Field(description="messages refused: another site, an unknown camera, out of order")
+    bus: dict[str, Any] | None = Field(default=None, description="the bus subscriptions' counters, when fed from the bus")
+
+
+@router.get("/health", response_model=Health, summary="Live services and data flow")
+def health(request: Request, state: StateDep) -> Health:
+    now = state.clock()
+    cameras = [c.state for c in state.camera_health()]
+    counts = CameraCounts(up=cameras.count("up"), down=cameras.count("down"), unknown=cameras.count("unknown"))
+    age = state.tracks_age_s()
+    status: Status
+    if age is None:
+        status = "no_data"
+    elif age > STALE_AFTER_S:
+        status = "stale"
+    elif counts.down:
+        status = "degraded"
+    else:
+        status = "ok"
+    return Health(
+        status=status,
+        site=state.site.site,
+        time=iso_utc(now),
+        uptime_s=max(0.0, (now - state.started_ns) / 1e9),
+        tracks_age_s=age,
+        services=[ServiceStatus(name=s.name, instance=s.instance, since=iso_utc(s.since_ns)) for s in state.services()],
+        cameras=counts,
+        ignored_messages=state.ignored,
+        bus=None if (stats := getattr(request.app.state, "bus_stats", None)) is None else stats.snapshot(),
+    )

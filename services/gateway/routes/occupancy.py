@@ -1,0 +1,148 @@
+"""``/api/occupancy``: how many people are in the site and in each zone, now and over time."""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+import numpy as np
+from fastapi import APIRouter, Query
+from pydantic import BaseModel, Field
+
+from bevflow.schemas import iso_utc
+from bevflow.site import Site
+
+from bevflow_services.gateway.history import OccupancySample
+from bevflow_services.gateway.params import (
+    NS,
+    LastS,
+    SiteDep,
+    StateDep,
+    TimeRangeDep,
+    ZoneParam,
+    check_zone,
+    recent,
+)
+
+router = APIRouter(prefix="/api/occupancy", tags=["occupancy"])
+Level = Literal["unknown", "normal", "crowded", "over_capacity"]
+
+
+class ZoneNow(BaseModel):
+    id: str
+    name: str
+    count: int
+    capacity: int | None
+    crowded_level: int | None
+    level: Level = Field(description="count against crowded_level and capacity; 'unknown' if neither is set")
+
+
+class OccupancyNow(BaseModel):
+    """The latest occupancy. Every site zone is listed, at count 0 before the first tracker tick."""
+
+    site: str
+    time_ns: int | None = Field(description="capture time of the tick; null before the first one")
+    time: str | None
+    total: int
+    capacity: int | None
+    level: Level
+    zones: list[ZoneNow]
+
+
+class OccupancyHistory(BaseModel):
+    """Occupancy over time, column by column: ``total[i]`` and ``zones[z][i]`` are the highest
+    counts in the ``step_s`` seconds starting at ``time_ns[i]``."""
+
+    step_s: int
+    time_ns: list[int]
+    total: list[int]
+    zones: dict[str, list[int]]
+
+
+def level_of(count: int, crowded_level: int | None, capacity: int | None) -> Level:
+    if capacity is not None and count > capacity:
+        return "over_capacity"
+    if crowded_level is not None and count >= crowded_level:
+        return "crowded"
+    if capacity is None and crowded_level is None:
+        return "unknown"
+    return "normal"
+
+
+def site_crowded_level(site: Site) -> int | None:
+    """The site's crowded level: 80 % of the site capacity, like a zone's default."""
+    cap = site.thresholds.site_capacity
+    return None if cap is None else max(1, int(0.8 * cap))
+
+
+@router.get("", response_model=OccupancyNow, summary="Occupancy now, site and per zone")
+def occupancy_now(state: StateDep) -> OccupancyNow:
+    site = state.site
+    latest = state.occupancy
+    counts = {z.id: z.count for z in latest.zones} if latest else {}
+    total = latest.total if latest else 0
+    capacity = site.thresholds.site_capacity
+    zones = [
+        ZoneNow(
+            id=z.id,
+            name=z.name,
+            count=counts.get(z.id, 0),
+            capacity=z.capacity,
+            crowded_level=z.effective_crowded_level,
+            level=level_of(counts.get(z.id, 0), z.effective_crowded_level, z.capacity),
+        )
+        for z in site.zones
+    ]
+    return OccupancyNow(
+        site=site.site,
+        time_ns=latest.time_ns if latest else None,
+        time=iso_utc(latest.time_ns) if latest else None,
+        total=total,
+        capacity=capacity,
+        level=level_of(total, site_crowded_level(site), capacity),
+        zones=zones,
+    )
+
+
+@router.get("/history", response_model=OccupancyHistory, summary="Occupancy over time (one sample per step)")
+def occupancy_history(
+    state: StateDep,
+    site: SiteDep,
+    window: TimeRangeDep,
+    zone: ZoneParam = None,
+    last_s: LastS = None,
+    step_s: Annotated[int, Query(ge=1, le=3600, description="seconds per sample; each sample is the maximum in its step")] = 1,
+    limit: Annotated[int, Query(ge=1, le=86400, description="at most this many samples, the newest ones")] = 3600,
+) -> OccupancyHistory:
+    check_zone(site, zone)
+    latest = state.occupancy
+    window = recent(window, last_s, latest.time_ns if latest else None)
+    samples = state.history.occupancy(window.since_ns, window.until_ns)
+    zone_ids = [zone] if zone is not None else [z.id for z in site.zones]
+    history = downsample(samples, zone_ids, step_s)
+    if len(history.time_ns) > limit:
+        cut = len(history.time_ns) - limit
+        history = OccupancyHistory(
+            step_s=step_s,
+            time_ns=history.time_ns[cut:],
+            total=history.total[cut:],
+            zones={z: counts[cut:] for z, counts in history.zones.items()},
+        )
+    return history
+
+
+def downsample(samples: list[OccupancySample], zone_ids: list[str], step_s: int) -> OccupancyHistory:
+    """Group one-second samples into ``step_s`` steps, keeping each step's maximum."""
+    if not samples:
+        return OccupancyHistory(step_s=step_s, time_ns=[], total=[], zones={z: [] for z in zone_ids})
+    seconds = np.array([s.time_ns // NS for s in samples], dtype=np.int64)
+    steps, first = np.unique(seconds // step_s, return_index=True)
+
+    def column(values: list[int]) -> list[int]:
+        return np.maximum.reduceat(np.asarray(values, dtype=np.int64), first).tolist()
+
+    return OccupancyHistory(
+        step_s=step_s,
+        time_ns=(steps * step_s * NS).tolist(),
+        total=column([s.total for s in samples]),
+        zones={z: column([s.zones.get(z, 0) for s in samples]) for z in zone_ids},
+    )

@@ -1,0 +1,56 @@
+"""``/api/site`` (the site description) and ``/api/config`` (what a client needs to connect)."""
+
+from __future__ import annotations
+
+import re
+
+from fastapi import APIRouter, Request
+from pydantic import BaseModel, Field
+
+from bevflow.schemas import EVENT_TYPES, SCHEMA_VERSION
+from bevflow.site import Site
+
+from bevflow_services.gateway.params import SiteDep
+
+router = APIRouter(prefix="/api", tags=["site"])
+
+
+class ClientConfig(BaseModel):
+    site: str
+    schema_version: int
+    view3d_url: str | None = Field(description="the 3D view (viser), on the host this request reached; null if off")
+    alert_types: list[str]
+    websockets: dict[str, str] = Field(description="websocket paths by stream name")
+    social_distance_m: float
+    history_s: float = Field(description="how far back the history routes reach")
+
+
+def redact_source(source: str | None) -> str | None:
+    """A camera source with any password in its URL hidden (``rtsp://user:***@host/...``)."""
+    if source is None:
+        return None
+    return re.sub(r"^([a-zA-Z][\w+.-]*://[^/:@]*):[^/@]*@", r"\1:***@", source)
+
+
+@router.get("/site", response_model=Site, summary="The site description: cameras, zones, thresholds")
+def site(site: SiteDep) -> Site:
+    """The site as loaded, except that passwords in camera stream URLs are replaced by ``***``."""
+    cameras = [c.model_copy(update={"source": redact_source(c.source)}) for c in site.cameras]
+    return site.model_copy(update={"cameras": cameras})
+
+
+@router.get("/config", response_model=ClientConfig, summary="Where the 3D view and the streams are")
+def config(request: Request, site: SiteDep) -> ClientConfig:
+    port = request.app.state.view3d_port
+    host = request.url.hostname or "127.0.0.1"
+    if ":" in host:  # an IPv6 literal needs brackets in a URL
+        host = f"[{host}]"
+    return ClientConfig(
+        site=site.site,
+        schema_version=SCHEMA_VERSION,
+        view3d_url=None if port is None else f"{request.url.scheme}://{host}:{port}/",
+        alert_types=list(EVENT_TYPES),
+        websockets={"alerts": "/ws/alerts", "tracks": "/ws/tracks"},
+        social_distance_m=site.thresholds.social_distance_m,
+        history_s=request.app.state.history_s,
+    )

@@ -1,0 +1,139 @@
+"""Websockets: ``/ws/alerts`` (alerts as they start and end) and ``/ws/tracks`` (every tracker tick).
+
+``/ws/alerts?types=distance_violation,over_capacity&zones=gate&replay=active`` sends one
+``AlertMessage`` JSON object per text frame: an alert when it starts and the same ``id`` again when
+it ends (``active`` false, ``end`` set). ``types`` and ``zones`` are comma-separated filters (omit
+one to get everything; an alert with zone null only passes when ``zones`` is omitted);
+``replay=active`` first sends the alerts already ongoing. ``/ws/tracks`` sends one ``Tracks`` JSON
+object per tick, starting with the latest one.
+
+A bad parameter refuses the connection with HTTP 400 and ``{"detail": "..."}`` naming it (or, on a
+server without the websocket denial-response extension, closes with code 1008 and that reason).
+Clients never send anything; what they send is ignored.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Awaitable, Callable
+from typing import Any
+
+from fastapi import APIRouter, HTTPException, WebSocket, WebSocketDisconnect
+from fastapi.responses import JSONResponse
+from pydantic import BaseModel
+
+from bevflow.schemas import EVENT_TYPES, AlertMessage, Tracks
+
+from bevflow_services.gateway.fanout import Subscription, pump
+from bevflow_services.gateway.params import split_csv
+from bevflow_services.gateway.state import GatewayState
+
+router = APIRouter()
+REPLAY_CHOICES = ("none", "active")
+# What sending to a client that has just gone away raises, depending on the server.
+CLIENT_GONE = (WebSocketDisconnect, OSError, RuntimeError)
+
+
+class AlertFilter:
+    """Which alerts a subscriber wants."""
+
+    def __init__(self, types: frozenset[str] | None, zones: frozenset[str] | None) -> None:
+        self.types = types
+        self.zones = zones
+
+    def __call__(self, alert: AlertMessage) -> bool:
+        if self.types is not None and alert.type not in self.types:
+            return False
+        return self.zones is None or alert.zone in self.zones
+
+
+def alert_filter(query: Any, state: GatewayState) -> tuple[AlertFilter, bool]:
+    """The filter and the replay flag from the query string; HTTPException naming a bad parameter."""
+    unknown = sorted(set(query.keys()) - {"types", "zones", "replay"})
+    if unknown:
+        raise HTTPException(400, f"unknown parameter(s) {', '.join(unknown)}; allowed: types, zones, replay")
+    types = split_csv(query.get("types"), "types", EVENT_TYPES)
+    zones = split_csv(query.get("zones"), "zones", tuple(z.id for z in state.site.zones))
+    replay = query.get("replay", "none")
+    if replay not in REPLAY_CHOICES:
+        raise HTTPException(400, f"replay: must be one of {', '.join(REPLAY_CHOICES)}, got {replay!r}")
+    return AlertFilter(types, zones), replay == "active"
+
+
+async def refuse(websocket: WebSocket, exc: HTTPException) -> None:
+    if "websocket.http.response" in websocket.scope.get("extensions", {}):
+        await websocket.send_denial_response(JSONResponse({"detail": exc.detail}, status_code=exc.status_code))
+    else:
+        await websocket.close(code=1008, reason=str(exc.detail)[:120])
+
+
+async def serve(websocket: WebSocket, sub: Subscription[Any], send: Callable[[Any], Awaitable[None]]) -> None:
+    """Forward ``sub`` to the client until it disconnects; its reads are only watched for closing."""
+
+    async def until_closed() -> None:
+        while (await websocket.receive())["type"] != "websocket.disconnect":
+            pass
+
+    tasks = [asyncio.create_task(pump(sub, send)), asyncio.create_task(until_closed())]
+    try:
+        await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        for task in tasks:
+            task.cancel()
+        outcomes = await asyncio.gather(*tasks, return_exceptions=True)
+    for outcome in outcomes:
+        if isinstance(outcome, Exception) and not isinstance(outcome, CLIENT_GONE):
+            raise outcome
+
+
+def json_sender(websocket: WebSocket) -> Callable[[BaseModel], Awaitable[None]]:
+    async def send(message: BaseModel) -> None:
+        await websocket.send_text(message.model_dump_json())
+
+    return send
+
+
+@router.websocket("/ws/alerts")
+async def alerts_stream(websocket: WebSocket) -> None:
+    state: GatewayState = websocket.app.state.gateway
+    try:
+        wanted, replay = alert_filter(websocket.query_params, state)
+    except HTTPException as exc:
+        await refuse(websocket, exc)
+        return
+    send = json_sender(websocket)
+    # Subscribe before accepting, so that a client that sees the connection open is certain to get
+    # every alert from then on; and before replaying, so an alert starting meanwhile is not lost
+    # (it may come twice: clients update alerts by id).
+    async with state.alerts.subscribe(wanted) as sub:
+        await websocket.accept()
+        if replay:
+            for event in state.active_alerts():
+                alert = AlertMessage.from_event(event)
+                if wanted(alert):
+                    await send(alert)
+        await serve(websocket, sub, send)
+
+
+@router.websocket("/ws/tracks")
+async def tracks_stream(websocket: WebSocket) -> None:
+    state: GatewayState = websocket.app.state.gateway
+    if websocket.query_params:
+        names = ", ".join(sorted(websocket.query_params.keys()))
+        await refuse(websocket, HTTPException(400, f"unknown parameter(s) {names}; /ws/tracks takes none"))
+        return
+    send_json = json_sender(websocket)
+    newest_sent = -1
+
+    async def send(tracks: Tracks) -> None:
+        nonlocal newest_sent
+        if tracks.time_ns > newest_sent:  # the latest tick may also be in the queue already
+            newest_sent = tracks.time_ns
+            await send_json(tracks)
+
+    async with state.tracks_stream.subscribe() as sub:
+        await websocket.accept()
+        latest = state.tracks
+        if latest is not None:
+            await send(latest)
+        await serve(websocket, sub, send)

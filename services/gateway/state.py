@@ -1,0 +1,195 @@
+"""Everything the gateway knows about one site, fed message by message, read by the routes.
+
+``GatewayState.apply`` takes the bus's messages (tracks, occupancy, events, per-camera frame
+metadata) and keeps the latest of each, the history (through a ``HistoryStore``), camera health,
+the set of live services, and the currently active alerts; it fans tracks and alerts out to
+websocket subscribers. It is plain Python: tests drive it directly, and ``main`` feeds it from the
+bus. ``apply`` and the readers may run on different threads.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from bevflow.schemas import (
+    AlertMessage,
+    CameraCylinders,
+    CameraHealthEvent,
+    Detections2D,
+    Event,
+    EventBase,
+    FrameHeader,
+    Occupancy,
+    Tracks,
+)
+from bevflow.site import Site
+
+from bevflow_services.gateway.camera_health import CameraHealth, CameraHealthBook
+from bevflow_services.gateway.fanout import Broadcaster
+from bevflow_services.gateway.history import HistoryStore, InMemoryHistory
+
+log = logging.getLogger(__name__)
+
+IGNORE_LOG_EVERY_S = 10.0
+StateMessage = Tracks | Occupancy | Event | FrameHeader | Detections2D | CameraCylinders
+
+
+@dataclass(frozen=True)
+class ServiceEntry:
+    """A live service instance, as its liveliness token announced it."""
+
+    name: str
+    instance: str
+    since_ns: int
+
+
+class GatewayState:
+    """The gateway's view of one site.
+
+    Args:
+        site: the site being served; messages for another site or an unknown camera are ignored.
+        site_id: the site's name on the bus if it differs from ``site.site``; messages naming
+            either are accepted.
+        history: where history goes; an in-memory hour by default.
+        clock: wall-clock nanoseconds, injectable so tests control camera timeouts.
+        camera_timeout_s: silence after which a camera counts as down.
+        alert_queue: per-websocket-client queue length for alerts (oldest dropped when full).
+        tracks_queue: the same for the live tracks stream; small, since only the newest matters.
+    """
+
+    def __init__(
+        self,
+        site: Site,
+        history: HistoryStore | None = None,
+        *,
+        site_id: str | None = None,
+        clock: Callable[[], int] = time.time_ns,
+        camera_timeout_s: float = 5.0,
+        alert_queue: int = 256,
+        tracks_queue: int = 4,
+    ) -> None:
+        self.site = site
+        self.site_id = site_id or site.site
+        self._site_names = {site.site, self.site_id}
+        self.history: HistoryStore = history if history is not None else InMemoryHistory()
+        self.clock = clock
+        self.alerts: Broadcaster[AlertMessage] = Broadcaster(alert_queue)
+        self.tracks_stream: Broadcaster[Tracks] = Broadcaster(tracks_queue)
+        self.started_ns = clock()
+        self._lock = threading.Lock()
+        self._cameras = CameraHealthBook([c.id for c in site.cameras], camera_timeout_s)
+        self._tracks: Tracks | None = None
+        self._tracks_received_ns: int | None = None
+        self._occupancy: Occupancy | None = None
+        self._active: dict[str, Event] = {}
+        self._services: dict[tuple[str, str], ServiceEntry] = {}
+        self.ignored = 0  # messages refused (other site, unknown camera), for /api/health
+        self._last_ignore_log = -IGNORE_LOG_EVERY_S
+
+    # --- input ---------------------------------------------------------------------------------
+    def apply(self, message: StateMessage) -> bool:
+        """Take one bus message into account; False (and a log line) if it was ignored."""
+        if isinstance(message, Tracks):
+            return self._apply_tracks(message)
+        if isinstance(message, Occupancy):
+            return self._apply_occupancy(message)
+        if isinstance(message, EventBase):
+            return self._apply_event(message)  # type: ignore[arg-type]
+        if isinstance(message, (FrameHeader, Detections2D, CameraCylinders)):
+            with self._lock:
+                known = self._cameras.record_frame(message.camera, message.seq, message.capture_ns, self.clock())
+            return known or self._ignore(f"message from unknown camera {message.camera!r}")
+        raise TypeError(f"GatewayState cannot apply a {type(message).__name__}")
+
+    def _apply_tracks(self, tracks: Tracks) -> bool:
+        if tracks.site not in self._site_names:
+            return self._ignore(f"tracks for site {tracks.site!r}")
+        latest = self._tracks
+        if latest is not None and tracks.time_ns < latest.time_ns:
+            return self._ignore(f"tracks at {tracks.time_ns} ns, older than the latest ({latest.time_ns} ns)")
+        try:
+            self.history.add_tracks(tracks)
+        except ValueError as exc:  # repeated or out-of-range track ids: a tracker bug, not a reason to stop
+            return self._ignore(f"tracks at {tracks.time_ns} ns: {exc}")
+        with self._lock:
+            self._tracks = tracks
+            self._tracks_received_ns = self.clock()
+        self.tracks_stream.publish(tracks)
+        return True
+
+    def _apply_occupancy(self, occupancy: Occupancy) -> bool:
+        if occupancy.site not in self._site_names:
+            return self._ignore(f"occupancy for site {occupancy.site!r}")
+        with self._lock:
+            if self._occupancy is None or occupancy.time_ns >= self._occupancy.time_ns:
+                self._occupancy = occupancy
+        self.history.add_occupancy(occupancy)
+        return True
+
+    def _apply_event(self, event: Event) -> bool:
+        with self._lock:
+            if isinstance(event, CameraHealthEvent) and not self._cameras.record_event(event):
+                return self._ignore(f"{event.type} for unknown camera {event.camera!r}")
+            if isinstance(event, CameraHealthEvent) and event.type == "camera_up":
+                # "up" is a moment, not a condition: it only ends the camera's open "down" alerts.
+                for other in [e for e in self._active.values() if e.type == "camera_down" and e.camera == event.camera]:
+                    del self._active[other.id]
+            elif event.end_ns is None:
+                self._active[event.id] = event
+            else:
+                self._active.pop(event.id, None)
+        self.history.add_event(event)
+        self.alerts.publish(AlertMessage.from_event(event))
+        return True
+
+    def _ignore(self, why: str) -> bool:
+        self.ignored += 1
+        now = time.monotonic()
+        if now - self._last_ignore_log >= IGNORE_LOG_EVERY_S:  # a stream of bad messages logs a line now and then
+            self._last_ignore_log = now
+            log.warning("gateway ignored %s (%d ignored so far)", why, self.ignored)
+        return False
+
+    def service_up(self, name: str, instance: str) -> None:
+        """A service's liveliness token appeared."""
+        with self._lock:
+            self._services.setdefault((name, instance), ServiceEntry(name, instance, self.clock()))
+
+    def service_down(self, name: str, instance: str) -> None:
+        """A service's liveliness token went away (it stopped or its process died)."""
+        with self._lock:
+            self._services.pop((name, instance), None)
+
+    # --- output --------------------------------------------------------------------------------
+    @property
+    def tracks(self) -> Tracks | None:
+        return self._tracks
+
+    @property
+    def occupancy(self) -> Occupancy | None:
+        return self._occupancy
+
+    def tracks_age_s(self) -> float | None:
+        """Seconds since the latest tracks message arrived (gateway clock), None before the first."""
+        received = self._tracks_received_ns
+        return None if received is None else max(0.0, (self.clock() - received) / 1e9)
+
+    def active_alerts(self) -> list[Event]:
+        """Alerts that have started and not ended, oldest first."""
+        with self._lock:
+            return sorted(self._active.values(), key=lambda e: (e.start_ns, e.id))
+
+    def camera_health(self) -> list[CameraHealth]:
+        """Every site camera's health, in site order."""
+        now = self.clock()
+        with self._lock:
+            return [self._cameras.health(c.id, now) for c in self.site.cameras]
+
+    def services(self) -> list[ServiceEntry]:
+        """Live service instances, sorted by name then instance."""
+        with self._lock:
+            return sorted(self._services.values(), key=lambda s: (s.name, s.instance))

@@ -1,0 +1,80 @@
+from __future__ import annotations
+
+import pytest
+from fastapi.testclient import TestClient
+
+from bevflow_services.gateway.state import GatewayState
+from tests.services.gateway.feed import S, T0, tracks
+
+
+def _walk(state: GatewayState) -> None:
+    """Track 2 walks along x towards track 1 and stops 0.5 m from it; track 3 stays far away."""
+    for k in range(6):
+        people = {1: (0.0, 0.0), 2: (max(0.5, 5.0 - k), 0.0), 3: (20.0, 3.0)}
+        near = [(1, 2)] if k >= 4 else []
+        state.apply(tracks(T0 + k * S, people, near, zones={1: ["gate"], 2: ["gate"] if k >= 2 else []}))
+
+
+def test_tracks_now_lists_the_latest_tick_by_id(client: TestClient, state: GatewayState) -> None:
+    _walk(state)
+    body = client.get("/api/tracks").json()
+    assert [t["id"] for t in body["items"]] == [1, 2, 3]
+    assert body["items"][1]["xy"] == [0.5, 0.0]
+    assert (body["total"], body["time_ns"], body["violations"]) == (3, T0 + 5 * S, [[1, 2]])
+
+
+@pytest.mark.parametrize(
+    ("query", "ids", "total"),
+    [("zone=gate", [1, 2], 2), ("zone=shop", [], 0), ("limit=2", [1, 2], 3), ("limit=2&offset=2", [3], 3), ("offset=5", [], 3)],
+)
+def test_tracks_now_filters_and_pages(client: TestClient, state: GatewayState, query: str, ids: list[int], total: int) -> None:
+    _walk(state)
+    body = client.get(f"/api/tracks?{query}").json()
+    assert [t["id"] for t in body["items"]] == ids and body["total"] == total
+
+
+def test_tracks_before_any_tick(client: TestClient) -> None:
+    assert client.get("/api/tracks").json() == {"time_ns": None, "time": None, "items": [], "total": 0, "limit": 100, "offset": 0, "violations": []}
+
+
+def test_one_track_has_its_state_now_and_its_trajectory(client: TestClient, state: GatewayState) -> None:
+    _walk(state)
+    body = client.get("/api/tracks/2").json()
+    assert (body["id"], body["active"], body["current"]["xy"]) == (2, True, [0.5, 0.0])
+    assert [p["xy"][0] for p in body["points"]] == [5.0, 4.0, 3.0, 2.0, 1.0, 0.5]
+    assert [p["time_ns"] for p in body["points"]] == [T0 + k * S for k in range(6)]
+    recent = client.get("/api/tracks/2?last_s=1").json()
+    assert [p["xy"][0] for p in recent["points"]] == [1.0, 0.5]
+
+
+def test_a_track_that_left_keeps_its_trajectory(client: TestClient, state: GatewayState) -> None:
+    _walk(state)
+    state.apply(tracks(T0 + 6 * S, {1: (0.0, 0.0)}))
+    body = client.get("/api/tracks/3").json()
+    assert (body["active"], body["current"], len(body["points"])) == (False, None, 6)
+
+
+def test_contacts_of_a_track(client: TestClient, state: GatewayState) -> None:
+    _walk(state)
+    body = client.get("/api/tracks/1/contacts").json()
+    assert (body["track"], body["limit_m"]) == (1, 2.0)  # the site's social distance by default
+    # Track 2 is closer than 2 m from k = 4 (1.0 m) on; held until the next sample, so 1 s of contact.
+    assert [(c["track"], (c["first_ns"] - T0) // S, c["min_distance_m"], c["duration_s"]) for c in body["contacts"]] == [(2, 4, 0.5, 1.0)]
+
+
+@pytest.mark.parametrize(
+    ("query", "tracks_in_contact"),
+    [("distance_m=3.5", [2]), ("distance_m=30", [2, 3]), ("distance_m=0.4", []), ("min_duration_s=2", []), ("until=1700000003", [])],
+)
+def test_contacts_filters(client: TestClient, state: GatewayState, query: str, tracks_in_contact: list[int]) -> None:
+    _walk(state)
+    body = client.get(f"/api/tracks/1/contacts?{query}").json()
+    assert [c["track"] for c in body["contacts"]] == tracks_in_contact
+
+
+@pytest.mark.parametrize("path", ["/api/tracks/42", "/api/tracks/42/contacts"])
+def test_an_unknown_track_is_404_naming_it(client: TestClient, state: GatewayState, path: str) -> None:
+    _walk(state)
+    response = client.get(path)
+    assert response.status_code == 404
+    assert "track 42" in response.json()["detail"]

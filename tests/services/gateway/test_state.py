@@ -1,0 +1,104 @@
+from __future__ import annotations
+
+import pytest
+
+from bevflow.schemas import CameraHealthEvent, Detections2D, FrameHeader, TrackState, Tracks
+
+from bevflow_services.gateway.history import EventQuery
+from bevflow_services.gateway.state import GatewayState
+from tests.services.gateway.feed import S, T0, FakeClock, occupancy, over_capacity, tracks, violation
+
+
+def test_tracks_become_the_latest_and_enter_the_history(state: GatewayState) -> None:
+    for k in range(3):
+        assert state.apply(tracks(T0 + k * S, {1: (float(k), 0.0), 2: (5.0, 5.0)}))
+    assert state.tracks is not None and state.tracks.time_ns == T0 + 2 * S
+    path = state.history.trajectory(1)
+    assert path is not None
+    assert path.times_ns.tolist() == [T0, T0 + S, T0 + 2 * S]
+    assert path.xy[:, 0].tolist() == [0.0, 1.0, 2.0]
+
+
+@pytest.mark.parametrize(
+    "message",
+    [
+        Tracks(site="elsewhere", time_ns=T0),
+        occupancy(T0, 1).model_copy(update={"site": "elsewhere"}),
+        Detections2D(camera="nope", seq=0, capture_ns=T0),
+        FrameHeader(camera="nope", seq=0, capture_ns=T0, width=10, height=10),
+        CameraHealthEvent(id="x", type="camera_down", camera="nope", start_ns=T0),
+    ],
+    ids=["tracks-other-site", "occupancy-other-site", "detections-unknown-camera", "frame-unknown-camera", "event-unknown-camera"],
+)
+def test_messages_for_another_site_or_camera_are_ignored_and_counted(state: GatewayState, message) -> None:
+    assert state.apply(message) is False
+    assert state.ignored == 1
+    assert state.tracks is None and state.occupancy is None and state.active_alerts() == []
+
+
+def test_tracks_older_than_the_latest_are_ignored(state: GatewayState) -> None:
+    state.apply(tracks(T0 + 2 * S, {1: (0.0, 0.0)}))
+    assert state.apply(tracks(T0 + S, {1: (9.0, 9.0)})) is False
+    assert state.tracks is not None and state.tracks.time_ns == T0 + 2 * S
+
+
+def test_active_alerts_follow_start_and_end_messages_with_the_same_id(state: GatewayState) -> None:
+    state.apply(violation("v1", T0))
+    state.apply(over_capacity("c1", T0 + S))
+    assert [e.id for e in state.active_alerts()] == ["v1", "c1"]
+    state.apply(violation("v1", T0, end_ns=T0 + 3 * S))
+    assert [e.id for e in state.active_alerts()] == ["c1"]
+    stored, total = state.history.events(EventQuery(), 10)
+    assert total == 2 and stored[1].end_ns == T0 + 3 * S  # the end replaced the start in the history
+
+
+def test_camera_up_ends_the_cameras_open_down_alert(state: GatewayState) -> None:
+    state.apply(CameraHealthEvent(id="down-north", type="camera_down", camera="north", start_ns=T0))
+    state.apply(CameraHealthEvent(id="down-south", type="camera_down", camera="south", start_ns=T0))
+    state.apply(CameraHealthEvent(id="up-north", type="camera_up", camera="north", start_ns=T0 + S))
+    assert [e.id for e in state.active_alerts()] == ["down-south"]
+    assert [c.state for c in state.camera_health()] == ["unknown", "down"]
+
+
+def test_camera_messages_update_health_with_the_gateway_clock(state: GatewayState, clock: FakeClock) -> None:
+    state.apply(Detections2D(camera="north", seq=0, capture_ns=T0))
+    clock.advance(2.0)
+    state.apply(Detections2D(camera="north", seq=3, capture_ns=T0 + S))
+    clock.advance(1.0)
+    north, south = state.camera_health()
+    assert (north.state, north.received, north.dropped, north.age_s) == ("up", 2, 2, 1.0)
+    assert south.state == "unknown"
+    clock.advance(10.0)
+    assert state.camera_health()[0].state == "down"
+
+
+def test_services_come_and_go(state: GatewayState, clock: FakeClock) -> None:
+    state.service_up("tracker", "host-1")
+    clock.advance(1.0)
+    state.service_up("ingest", "host-2")
+    state.service_up("tracker", "host-1")  # a repeated announcement keeps the first time
+    assert [(s.name, s.instance, s.since_ns) for s in state.services()] == [
+        ("ingest", "host-2", T0 + S),
+        ("tracker", "host-1", T0),
+    ]
+    state.service_down("tracker", "host-1")
+    assert [s.name for s in state.services()] == ["ingest"]
+
+
+def test_tracks_age_uses_the_gateway_clock(state: GatewayState, clock: FakeClock) -> None:
+    assert state.tracks_age_s() is None
+    state.apply(tracks(T0, {}))
+    clock.advance(2.5)
+    assert state.tracks_age_s() == 2.5
+
+
+def test_a_message_of_another_kind_is_a_bug(state: GatewayState) -> None:
+    with pytest.raises(TypeError, match="TrackState"):
+        state.apply(TrackState(id=1, xy=(0.0, 0.0)))  # type: ignore[arg-type]
+
+
+def test_tracks_the_history_refuses_are_ignored_not_raised(state: GatewayState) -> None:
+    repeated_id = Tracks(site="hall", time_ns=T0, tracks=[TrackState(id=1, xy=(0.0, 0.0)), TrackState(id=1, xy=(1.0, 0.0))])
+    assert state.apply(repeated_id) is False
+    assert (state.ignored, state.tracks) == (1, None)
+    assert state.apply(tracks(T0 + S, {1: (0.0, 0.0)}))
