@@ -1,0 +1,620 @@
+"""The message bus: the one module that talks to Zenoh.
+
+Everything a service needs to move bevflow's messages between processes lives here: how a session is
+configured (``BusConfig``, ``add_bus_arguments``), where each message goes (``Keys``), how it is
+encoded (JSON for :mod:`bevflow.schemas` messages, raw pixels plus a JSON header for frames), how
+received samples reach the code that wants them, and which services are up (liveliness).
+
+Zenoh calls subscribers back on its own threads and has no asyncio API. Three ways to receive:
+
+- ``subscribe``: a plain callback, run on a Zenoh thread; for quick handlers.
+- ``AsyncSubscription``: decoded messages go to an event loop through ``call_soon_threadsafe``
+  into a bounded queue that drops its oldest item when full, so a stalled consumer never makes
+  memory grow and always sees recent data.
+- ``LatestSubscription``: a blocking ``take()`` for a worker thread that only ever wants the newest
+  sample (a detector that is slower than its camera); older samples are dropped, not queued.
+
+A bad payload never raises inside a Zenoh callback: it is counted in ``BusStats`` by reason and
+logged (at most once per reason per ``log_every_s``), and the stream goes on.
+
+>>> keys = Keys("hall")
+>>> keys.cylinders("cam1")
+'bevflow/hall/cam/cam1/cylinders'
+>>> keys.camera_of("bevflow/hall/cam/cam1/cylinders")
+'cam1'
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import collections
+import json
+import logging
+import os
+import re
+import socket
+import threading
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Generic, Literal, Protocol, TypeVar
+
+import numpy as np
+import zenoh
+from pydantic import TypeAdapter, ValidationError
+
+from bevflow.schemas import SCHEMA_VERSION, FrameHeader
+
+log = logging.getLogger(__name__)
+
+M = TypeVar("M")
+Mode = Literal["peer", "client", "router"]
+MODES: tuple[str, ...] = ("peer", "client", "router")
+MiB = 1 << 20
+
+
+# --- sessions ------------------------------------------------------------------------------------
+class BusError(Exception):
+    """Bus settings a user got wrong, or a bus that cannot be joined (an endpoint in use, a bad
+    address, a bad config file). One line, fit to show as is."""
+
+
+@dataclass(frozen=True)
+class BusConfig:
+    """How a process joins the bus. Multicast scouting is off by default: deployments name their
+    endpoints, and tests on one machine must not find each other by accident."""
+
+    mode: Mode = "peer"
+    connect: tuple[str, ...] = ()
+    listen: tuple[str, ...] = ()
+    multicast_scouting: bool = False
+    shared_memory: bool = True
+    # Zenoh's default pool is 16 MB; a few 1280x1280 BGR frames (4.9 MB each) in flight exhaust it.
+    shm_pool_bytes: int = 64 * MiB
+    timestamping: bool = False
+    zenoh_config_file: Path | None = None
+
+    def __post_init__(self) -> None:
+        if self.mode not in MODES:
+            raise BusError(f"bus mode must be one of {', '.join(MODES)}, got {self.mode!r}")
+        if self.mode == "client" and not self.connect:
+            raise BusError("client mode needs at least one --connect endpoint (a router's address)")
+        for endpoint in (*self.connect, *self.listen):
+            if not re.fullmatch(r"[a-z0-9]+/\S+", endpoint):
+                raise BusError(f"endpoint {endpoint!r} is not of the form PROTOCOL/ADDRESS, e.g. tcp/127.0.0.1:7447")
+
+    def to_zenoh(self) -> zenoh.Config:
+        """The Zenoh configuration: the optional file first, then these settings on top."""
+        conf = zenoh.Config.from_file(self.zenoh_config_file) if self.zenoh_config_file else zenoh.Config()
+        conf.insert_json5("mode", json.dumps(self.mode))
+        if self.connect:
+            conf.insert_json5("connect/endpoints", json.dumps(list(self.connect)))
+        if self.listen:
+            conf.insert_json5("listen/endpoints", json.dumps(list(self.listen)))
+        conf.insert_json5("scouting/multicast/enabled", json.dumps(self.multicast_scouting))
+        conf.insert_json5("transport/shared_memory/enabled", json.dumps(self.shared_memory))
+        conf.insert_json5("transport/shared_memory/transport_optimization/pool_size", str(self.shm_pool_bytes))
+        if self.timestamping:
+            conf.insert_json5("timestamping/enabled", "true")
+        return conf
+
+
+def open_session(cfg: BusConfig) -> zenoh.Session:
+    """Open a Zenoh session; failures become one ``BusError`` line that names the settings."""
+    try:
+        return zenoh.open(cfg.to_zenoh())
+    except (zenoh.ZError, ValueError) as exc:
+        where = f"mode={cfg.mode} listen={list(cfg.listen)} connect={list(cfg.connect)}"
+        if cfg.zenoh_config_file:
+            where += f" config={cfg.zenoh_config_file}"
+        # Zenoh's messages end with Rust source locations, which mean nothing to an operator.
+        reason = re.sub(r"\s+at /\S+?\.rs:\d+\.?", "", str(exc)).strip(" .[]")
+        raise BusError(f"cannot join the bus ({where}): {reason}") from None
+
+
+def add_bus_arguments(parser: argparse.ArgumentParser, *, mode: bool = True) -> None:
+    """The command-line flags every service shares (as in the zenoh examples)."""
+    group = parser.add_argument_group("message bus (Zenoh)")
+    if mode:
+        group.add_argument("-m", "--mode", choices=("peer", "client"), default="peer",
+                           help="peer: talk to other processes directly; client: go through a router (default: peer)")
+    group.add_argument("-e", "--connect", action="append", default=[], metavar="ENDPOINT",
+                       help="endpoint to connect to, e.g. tcp/192.168.1.10:7447 (repeatable)")
+    group.add_argument("-l", "--listen", action="append", default=[], metavar="ENDPOINT",
+                       help="endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable)")
+    group.add_argument("--multicast-scouting", action=argparse.BooleanOptionalAction, default=False,
+                       help="find other processes on the LAN by multicast (default: off; name endpoints instead)")
+    group.add_argument("--shared-memory", action=argparse.BooleanOptionalAction, default=True,
+                       help="pass large frames through shared memory between processes on one host (default: on)")
+    group.add_argument("--zenoh-config", type=Path, default=None, metavar="FILE",
+                       help="a Zenoh JSON5 config file (TLS, access control); "
+                       "the settings above, defaults included, override it")
+
+
+def config_from_args(args: argparse.Namespace, *, mode: Mode | None = None) -> BusConfig:
+    """The ``BusConfig`` named by the flags of ``add_bus_arguments``; ``mode`` overrides --mode."""
+    return BusConfig(
+        mode=mode or getattr(args, "mode", "peer"),
+        connect=tuple(args.connect),
+        listen=tuple(args.listen),
+        multicast_scouting=args.multicast_scouting,
+        shared_memory=args.shared_memory,
+        zenoh_config_file=args.zenoh_config,
+    )
+
+
+# --- the key space -------------------------------------------------------------------------------
+_CHUNK = re.compile(r"[A-Za-z0-9_.-]+")
+
+
+def _chunk(value: str, what: str) -> str:
+    if value == "*" or _CHUNK.fullmatch(value):
+        return value
+    raise ValueError(f"{what} {value!r} cannot be part of a bus key: use letters, digits, '_', '.', '-'")
+
+
+@dataclass(frozen=True)
+class Keys:
+    """Where every message of one site goes. Pass ``"*"`` for a camera (or service, instance) to
+    get the wildcard that matches all of them."""
+
+    site: str
+    prefix: str = "bevflow"
+
+    def __post_init__(self) -> None:
+        _chunk(self.site, "site id")
+
+    @property
+    def root(self) -> str:
+        return f"{self.prefix}/{self.site}"
+
+    def frame(self, camera: str) -> str:
+        return f"{self.root}/cam/{_chunk(camera, 'camera id')}/frame"
+
+    def detections(self, camera: str) -> str:
+        return f"{self.root}/cam/{_chunk(camera, 'camera id')}/detections"
+
+    def cylinders(self, camera: str) -> str:
+        return f"{self.root}/cam/{_chunk(camera, 'camera id')}/cylinders"
+
+    @property
+    def tracks(self) -> str:
+        return f"{self.root}/tracks"
+
+    @property
+    def occupancy(self) -> str:
+        return f"{self.root}/occupancy"
+
+    @property
+    def events(self) -> str:
+        return f"{self.root}/events"
+
+    def alive(self, service: str = "*", instance: str = "*") -> str:
+        return f"{self.root}/alive/{_chunk(service, 'service name')}/{_chunk(instance, 'instance id')}"
+
+    def camera_of(self, key: str) -> str:
+        """The camera id in a per-camera key; ``ValueError`` for any other key."""
+        parts = str(key).split("/")
+        if len(parts) != 5 or "/".join(parts[:2]) != self.root or parts[2] != "cam":
+            raise ValueError(f"{key!r} is not a per-camera key of site {self.site!r}")
+        return parts[3]
+
+    def service_of(self, key: str) -> tuple[str, str]:
+        """(service, instance) of a liveliness key; ``ValueError`` for any other key."""
+        parts = str(key).split("/")
+        if len(parts) != 5 or "/".join(parts[:2]) != self.root or parts[2] != "alive":
+            raise ValueError(f"{key!r} is not a liveliness key of site {self.site!r}")
+        return parts[3], parts[4]
+
+
+# --- statistics ----------------------------------------------------------------------------------
+class BusStats:
+    """Counts of what subscriptions received, decoded, rejected (by reason) and dropped; safe to
+    share between subscriptions and threads. Rejections are logged at most once per reason per
+    ``log_every_s``, with how many were not logged since."""
+
+    def __init__(self, log_every_s: float = 10.0) -> None:
+        self.log_every_s = log_every_s
+        self._lock = threading.Lock()
+        self.received = 0
+        self.decoded = 0
+        self.dropped = 0
+        self.handler_errors = 0
+        self.rejected: collections.Counter[str] = collections.Counter()
+        self._last_log: dict[str, tuple[float, int]] = {}
+
+    def count(self, what: Literal["received", "decoded", "dropped", "handler_errors"], n: int = 1) -> None:
+        with self._lock:
+            setattr(self, what, getattr(self, what) + n)
+
+    def reject(self, key: str, reason: str, detail: str) -> None:
+        with self._lock:
+            self.rejected[reason] += 1
+            total = self.rejected[reason]
+            last_t, last_total = self._last_log.get(reason, (-float("inf"), 0))
+            now = time.monotonic()
+            if now - last_t < self.log_every_s:
+                return
+            self._last_log[reason] = (now, total)
+        quiet = total - last_total - 1
+        more = f" ({quiet} more since the last report)" if quiet > 0 else ""
+        log.warning("rejected a message on %s: %s: %s%s", key, reason, detail[:300], more)
+
+    def snapshot(self) -> dict[str, Any]:
+        """A JSON-ready copy, for health endpoints."""
+        with self._lock:
+            return {
+                "received": self.received,
+                "decoded": self.decoded,
+                "rejected": dict(self.rejected),
+                "dropped": self.dropped,
+                "handler_errors": self.handler_errors,
+            }
+
+
+# --- codecs --------------------------------------------------------------------------------------
+class Rejected(Exception):
+    """A payload that cannot be decoded; ``reason`` is a short stable label for counters."""
+
+    def __init__(self, reason: str, detail: str) -> None:
+        super().__init__(f"{reason}: {detail}")
+        self.reason = reason
+        self.detail = detail
+
+
+def _rejection(err: ValidationError) -> Rejected:
+    errors = err.errors(include_url=False)
+    detail = "; ".join(f"{'.'.join(map(str, e['loc'])) or 'message'}: {e['msg']}" for e in errors[:3])
+    if any(e["type"] in ("json_invalid", "json_type") for e in errors):
+        return Rejected("malformed", detail)
+    versions = [e.get("input") for e in errors if e["loc"] and e["loc"][-1] == "schema_version"]
+    if versions:
+        return Rejected("schema_version", f"schema_version {versions[0]!r}; this release reads {SCHEMA_VERSION}")
+    if all(e["type"] == "extra_forbidden" for e in errors):
+        return Rejected("unknown_fields", detail)
+    return Rejected("invalid", detail)
+
+
+def _validate_json(adapter: TypeAdapter[M], raw: bytes) -> M:
+    try:
+        return adapter.validate_json(raw)
+    except ValidationError as exc:
+        raise _rejection(exc) from None
+
+
+class Codec(Protocol[M]):
+    """Turns one kind of message into (payload, attachment, encoding) and back."""
+
+    name: str
+
+    def encode(self, message: M) -> tuple[bytes, bytes | None, zenoh.Encoding]: ...
+
+    def decode(self, payload: bytes, attachment: bytes | None) -> M:
+        """The message, or ``Rejected``."""
+        ...
+
+
+class JsonCodec(Generic[M]):
+    """A :mod:`bevflow.schemas` message (or a union such as ``schemas.Event``) as JSON."""
+
+    def __init__(self, message_type: Any, name: str | None = None) -> None:
+        self.adapter: TypeAdapter[M] = TypeAdapter(message_type)
+        self.name = name or getattr(message_type, "__name__", "message")
+        self.encoding = zenoh.Encoding.APPLICATION_JSON.with_schema(f"bevflow/{self.name}/v{SCHEMA_VERSION}")
+
+    def encode(self, message: M) -> tuple[bytes, bytes | None, zenoh.Encoding]:
+        # warnings="error": publishing the wrong type is a bug, not something to send half-encoded.
+        return self.adapter.dump_json(message, warnings="error"), None, self.encoding
+
+    def decode(self, payload: bytes, attachment: bytes | None) -> M:
+        return _validate_json(self.adapter, payload)
+
+
+@dataclass(frozen=True)
+class Frame:
+    """A camera image as it travels: ``image`` is HxWx3 (bgr8), HxW (gray8) or the 1-D bytes of a
+    JPEG, uint8; ``header`` says which."""
+
+    header: FrameHeader
+    image: np.ndarray
+
+
+_HEADER = TypeAdapter(FrameHeader)
+
+
+def _pixel_shape(header: FrameHeader) -> tuple[int, ...] | None:
+    return {"bgr8": (header.height, header.width, 3), "gray8": (header.height, header.width)}.get(header.encoding)
+
+
+class FrameCodec:
+    """Pixels as the payload, the ``FrameHeader`` as JSON in the attachment. The receiver gets a
+    read-only array over its own copy of the bytes."""
+
+    name = "Frame"
+
+    def encode(self, frame: Frame) -> tuple[bytes, bytes, zenoh.Encoding]:
+        header, image = frame.header, frame.image
+        shape = _pixel_shape(header)
+        fits = image.shape == shape if shape is not None else image.ndim == 1
+        if image.dtype != np.uint8 or not fits:
+            raise ValueError(f"image {image.dtype}{list(image.shape)} does not match its header "
+                             f"({header.encoding} {header.width}x{header.height})")
+        if header.encoding == "jpeg":
+            encoding = zenoh.Encoding.IMAGE_JPEG
+        else:
+            schema = f"{header.encoding};{header.width}x{header.height}"
+            encoding = zenoh.Encoding.APPLICATION_OCTET_STREAM.with_schema(schema)
+        return np.ascontiguousarray(image).tobytes(), header.model_dump_json().encode(), encoding
+
+    def decode(self, payload: bytes, attachment: bytes | None) -> Frame:
+        if attachment is None:
+            raise Rejected("no_header", "a frame arrived without its FrameHeader attachment")
+        header = _validate_json(_HEADER, attachment)
+        shape = _pixel_shape(header)
+        expected = int(np.prod(shape)) if shape else None
+        if (expected is not None and len(payload) != expected) or not payload:
+            size = f"{header.encoding} {header.width}x{header.height}"
+            raise Rejected("frame_size", f"{len(payload)} bytes for a {size} frame")
+        image = np.frombuffer(payload, dtype=np.uint8)
+        return Frame(header=header, image=image.reshape(shape) if shape else image)
+
+
+FRAMES = FrameCodec()
+
+
+def decode_sample(codec: Codec[M], sample: zenoh.Sample) -> M:
+    """Decode one sample; raises ``Rejected`` for a bad payload."""
+    attachment = sample.attachment
+    return codec.decode(sample.payload.to_bytes(), attachment.to_bytes() if attachment is not None else None)
+
+
+# --- publishing ----------------------------------------------------------------------------------
+class Publication(Generic[M]):
+    """A declared publisher of one kind of message on one key.
+
+    ``block_when_congested`` makes ``put`` wait for a congested link instead of dropping the
+    message: right for rare messages that must arrive (alerts), wrong for streams where a newer
+    message replaces an older one (frames, tracks). Without it, the first large message that goes
+    through shared memory on a new link is dropped while the link sets shared memory up, so a
+    frame stream loses its first frame."""
+
+    def __init__(self, session: zenoh.Session, key: str, codec: Codec[M], *,
+                 block_when_congested: bool = False) -> None:
+        self.key = key
+        self._codec = codec
+        congestion = zenoh.CongestionControl.BLOCK if block_when_congested else zenoh.CongestionControl.DROP
+        self._publisher = session.declare_publisher(key, congestion_control=congestion)
+
+    def put(self, message: M) -> None:
+        payload, attachment, encoding = self._codec.encode(message)
+        self._publisher.put(payload, attachment=attachment, encoding=encoding)
+
+    def has_subscribers(self) -> bool:
+        return self._publisher.matching_status.matching
+
+    def wait_for_subscribers(self, timeout: float) -> bool:
+        """Whether a matching subscriber appeared within ``timeout`` seconds (declarations take a
+        moment to propagate, so the first messages after start-up may otherwise go nowhere)."""
+        deadline = time.monotonic() + timeout
+        while not self.has_subscribers():
+            if time.monotonic() >= deadline:
+                return False
+            time.sleep(0.005)
+        return True
+
+    def close(self) -> None:
+        _undeclare(self._publisher)
+
+    def __enter__(self) -> Publication[M]:
+        return self
+
+    def __exit__(self, *_exc: object) -> None:
+        self.close()
+
+
+def _undeclare(entity: Any) -> None:
+    try:
+        entity.undeclare()
+    except zenoh.ZError:  # already gone with its session
+        pass
+
+
+# --- subscribing ---------------------------------------------------------------------------------
+class Subscription(Generic[M]):
+    """A subscriber that decodes each sample with ``codec`` and passes it to ``on_message`` on a
+    Zenoh thread. Bad payloads and handler exceptions are counted in ``stats``, never raised."""
+
+    def __init__(self, session: zenoh.Session, key: str, codec: Codec[M],
+                 on_message: Callable[[M], object] | None = None, *, stats: BusStats | None = None) -> None:
+        self.key = key
+        self.codec = codec
+        self.stats = stats if stats is not None else BusStats()
+        self._on_message = on_message
+        self._subscriber = session.declare_subscriber(key, self._on_sample)
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        self.stats.count("received")
+        self._accept(sample)
+
+    def _accept(self, sample: zenoh.Sample) -> None:
+        message = self._decode(sample)
+        if message is None:
+            return
+        try:
+            self._deliver(message)
+        except Exception as exc:  # a handler bug must not end the subscription
+            self.stats.count("handler_errors")
+            log.exception("handler for %s failed: %s", self.key, exc)
+
+    def _decode(self, sample: zenoh.Sample) -> M | None:
+        key = str(sample.key_expr)
+        try:
+            message = decode_sample(self.codec, sample)
+        except Rejected as exc:
+            self.stats.reject(key, exc.reason, exc.detail)
+            return None
+        except Exception as exc:  # a codec bug: count it, keep the stream
+            self.stats.reject(key, "decoder_error", repr(exc))
+            return None
+        self.stats.count("decoded")
+        return message
+
+    def _deliver(self, message: M) -> None:
+        if self._on_message is not None:
+            self._on_message(message)
+
+    def close(self) -> None:
+        _undeclare(self._subscriber)
+
+    def __enter__(self) -> Subscription[M]:
+        return self
+
+    def __exit__(self, *_exc: object) -> None:
+        self.close()
+
+
+def subscribe(session: zenoh.Session, key: str, codec: Codec[M], on_message: Callable[[M], object],
+              *, stats: BusStats | None = None) -> Subscription[M]:
+    """Call ``on_message`` (on a Zenoh thread) with each decoded message published on ``key``."""
+    return Subscription(session, key, codec, on_message, stats=stats)
+
+
+class AsyncSubscription(Subscription[M]):
+    """Decoded messages for an asyncio consumer: ``await sub.get()`` or ``async for``.
+
+    The queue holds at most ``maxsize`` messages; when it is full the oldest one is dropped (and
+    counted in ``stats.dropped``), so a consumer that falls behind resumes with recent data.
+    Create it on the event loop's thread, or pass ``loop``."""
+
+    def __init__(self, session: zenoh.Session, key: str, codec: Codec[M], *, maxsize: int = 64,
+                 loop: asyncio.AbstractEventLoop | None = None, stats: BusStats | None = None) -> None:
+        if maxsize < 1:
+            raise ValueError("maxsize must be at least 1")
+        self._loop = loop or asyncio.get_running_loop()
+        self.queue: asyncio.Queue[M] = asyncio.Queue(maxsize)
+        super().__init__(session, key, codec, stats=stats)
+
+    def _deliver(self, message: M) -> None:  # on a Zenoh thread
+        try:
+            self._loop.call_soon_threadsafe(self._enqueue, message)
+        except RuntimeError:  # the loop is closed: nobody will read it
+            self.stats.count("dropped")
+
+    def _enqueue(self, message: M) -> None:  # on the loop's thread
+        if self.queue.full():
+            self.queue.get_nowait()
+            self.stats.count("dropped")
+        self.queue.put_nowait(message)
+
+    async def get(self) -> M:
+        return await self.queue.get()
+
+    def __aiter__(self) -> AsyncSubscription[M]:
+        return self
+
+    async def __anext__(self) -> M:
+        return await self.queue.get()
+
+
+class LatestSubscription(Subscription[M]):
+    """For a worker thread slower than its input: ``take()`` returns the newest message and
+    older ones are dropped unread (counted in ``stats.dropped``). Decoding happens in ``take``, so
+    frames that are overwritten cost nothing but their transfer."""
+
+    def __init__(self, session: zenoh.Session, key: str, codec: Codec[M], *, keep: int = 1,
+                 stats: BusStats | None = None) -> None:
+        self._samples: collections.deque[zenoh.Sample] = collections.deque(maxlen=keep)
+        self._ready = threading.Condition()
+        super().__init__(session, key, codec, stats=stats)
+
+    def _accept(self, sample: zenoh.Sample) -> None:
+        with self._ready:
+            if len(self._samples) == self._samples.maxlen:
+                self.stats.count("dropped")
+            self._samples.append(sample)
+            self._ready.notify()
+
+    def take(self, timeout: float | None = None) -> M | None:
+        """The oldest kept message (the newest one with ``keep=1``), waiting up to ``timeout``
+        seconds (forever if None); None when nothing valid arrived in time."""
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            with self._ready:
+                while not self._samples:
+                    left = None if deadline is None else deadline - time.monotonic()
+                    if left is not None and left <= 0:
+                        return None
+                    self._ready.wait(left)
+                sample = self._samples.popleft()
+            message = self._decode(sample)
+            if message is not None:
+                return message
+
+
+# --- liveliness ----------------------------------------------------------------------------------
+def default_instance_id() -> str:
+    """``<host>-<pid>``, made safe for a key."""
+    return re.sub(r"[^A-Za-z0-9_.-]", "-", f"{socket.gethostname()}-{os.getpid()}")
+
+
+def announce(session: zenoh.Session, keys: Keys, service: str, instance_id: str | None = None) -> zenoh.LivelinessToken:
+    """Declare that this process runs ``service``. Keep the returned token: the service counts as
+    up until it is undeclared, its session closes, or its process dies."""
+    return session.liveliness().declare_token(keys.alive(service, instance_id or default_instance_id()))
+
+
+@dataclass(frozen=True, order=True)
+class LiveService:
+    service: str
+    instance: str
+
+
+@dataclass
+class LiveServices:
+    """The site's services that are up now, from their liveliness tokens (those already up when
+    this starts included). ``on_change(service, alive)`` runs on a Zenoh thread."""
+
+    session: zenoh.Session
+    keys: Keys
+    on_change: Callable[[LiveService, bool], object] | None = None
+    _live: set[LiveService] = field(default_factory=set, init=False)
+    _changed: threading.Condition = field(default_factory=threading.Condition, init=False)
+
+    def __post_init__(self) -> None:
+        liveliness = self.session.liveliness()
+        self._subscriber = liveliness.declare_subscriber(self.keys.alive(), self._on_sample, history=True)
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        try:
+            live = LiveService(*self.keys.service_of(str(sample.key_expr)))
+        except ValueError:
+            return
+        alive = sample.kind == zenoh.SampleKind.PUT
+        with self._changed:
+            (self._live.add if alive else self._live.discard)(live)
+            self._changed.notify_all()
+        if self.on_change is not None:
+            try:
+                self.on_change(live, alive)
+            except Exception:
+                log.exception("liveliness handler failed")
+
+    def current(self) -> list[LiveService]:
+        with self._changed:
+            return sorted(self._live)
+
+    def wait_until(self, predicate: Callable[[set[LiveService]], bool], timeout: float) -> bool:
+        """Block until ``predicate(live services)`` holds; False after ``timeout`` seconds."""
+        with self._changed:
+            return self._changed.wait_for(lambda: predicate(set(self._live)), timeout)
+
+    def close(self) -> None:
+        _undeclare(self._subscriber)
+
+
+def all_alive(services: Iterable[str]) -> Callable[[set[LiveService]], bool]:
+    """A ``wait_until`` predicate: every named service has at least one live instance."""
+    wanted = set(services)
+    return lambda live: wanted <= {s.service for s in live}

@@ -1,0 +1,1 @@
+"""The Zenoh router: links client-mode services and other hosts (``bevflow serve router``)."""
