@@ -18,15 +18,11 @@ import logging
 import sys
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
-from pathlib import Path
 from typing import Any
 
 import uvicorn
 
-import bevflow
-
 from bevflow.schemas import Detections2D, Event, Occupancy, Tracks
-from bevflow.site import Site, SiteError, load_site
 
 from bevflow_services.bus import (
     AsyncSubscription,
@@ -39,14 +35,12 @@ from bevflow_services.bus import (
     config_from_args,
     open_session,
 )
-from bevflow_services.cli import UserError
+from bevflow_services.cli.serve import service_site
 from bevflow_services.gateway.app import create_app
 from bevflow_services.gateway.history import InMemoryHistory
 from bevflow_services.gateway.state import GatewayState
 
 log = logging.getLogger(__name__)
-
-BUILTIN_SITES = Path(bevflow.__file__).resolve().parent / "data" / "sites"
 
 SERVICE = "gateway"
 # Queue lengths: alerts must not be dropped; for tracks only the newest matters.
@@ -107,23 +101,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        help="seconds of occupancy, alert and trajectory history kept in memory (default 3600)")
 
 
-def load_site_arg(value: str) -> Site:
-    """``--site``: a site file, or the name of a site shipped with bevflow (``example-hall``)."""
-    path = Path(value)
-    if not path.exists() and path.suffix == "" and "/" not in value:
-        shipped = BUILTIN_SITES / f"{value}.yaml"
-        if shipped.is_file():
-            path = shipped
-    try:
-        return load_site(path)
-    except SiteError as exc:
-        raise UserError(str(exc)) from None
-
-
 def main(args: argparse.Namespace) -> int:
     """Serve until interrupted (``bevflow serve gateway``). Bus errors raise ``BusError``."""
-    site = load_site_arg(str(args.site))
-    site_id = getattr(args, "site_id", None) or site.site
+    site, site_id = service_site(args)
     view3d_port = None if args.no_view3d else (args.view3d_port or args.port + 1)
     session = open_session(config_from_args(args))
     stats = BusStats()

@@ -8,11 +8,10 @@ routes for every client-mode session that connects to it. Services then run with
 from __future__ import annotations
 
 import argparse
-import signal
-import threading
 from dataclasses import replace
 
 from bevflow_services import bus
+from bevflow_services.cli.serve import stop_on_signals
 
 DEFAULT_LISTEN = "tcp/0.0.0.0:7447"
 
@@ -28,22 +27,18 @@ def main(args: argparse.Namespace) -> int:
     if not cfg.listen:
         cfg = replace(cfg, listen=(DEFAULT_LISTEN,))
     session = bus.open_session(cfg)
-    stop = threading.Event()
-    previous = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
-        site_id = getattr(args, "site_id", None)
-        token = bus.announce(session, bus.Keys(site_id), "router", str(session.zid())) if site_id else None
-        print(f"bevflow router {session.zid()} listening on {', '.join(cfg.listen)}", flush=True)
-        if cfg.connect:
-            print(f"bevflow router linked to {', '.join(cfg.connect)}", flush=True)
-        # A timed wait, so the signal handler gets to run promptly on the main thread.
-        while not stop.wait(0.2):
-            pass
-        if token is not None:
-            token.undeclare()
+        with stop_on_signals() as stop:
+            site_id = getattr(args, "site_id", None)
+            token = bus.announce(session, bus.Keys(site_id), "router", str(session.zid())) if site_id else None
+            print(f"bevflow router {session.zid()} listening on {', '.join(cfg.listen)}", flush=True)
+            if cfg.connect:
+                print(f"bevflow router linked to {', '.join(cfg.connect)}", flush=True)
+            while not stop.wait(0.2):
+                pass
+            if token is not None:
+                token.undeclare()
     finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
         session.close()
     print("bevflow router stopped", flush=True)
     return 0

@@ -10,10 +10,11 @@ nanoseconds since the Unix epoch (``*_ns``), pixel boxes as (x0, y0, x1, y1).
 
 from __future__ import annotations
 
+from datetime import datetime, timezone
 from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, TypeAdapter
+from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, model_validator
 
 from bevflow.detections import Boxes, Cylinders
 
@@ -49,6 +50,12 @@ class Detections2D(Message):
     boxes: list[tuple[Finite, Finite, Finite, Finite]] = Field(default_factory=list)
     confidence: list[Annotated[float, Field(ge=0, le=1)]] = Field(default_factory=list)
 
+    @model_validator(mode="after")
+    def _one_confidence_per_box(self) -> Detections2D:
+        if self.confidence and len(self.confidence) != len(self.boxes):
+            raise ValueError(f"{len(self.confidence)} confidences for {len(self.boxes)} boxes")
+        return self
+
     def to_boxes(self) -> Boxes:
         return Boxes(xyxy=np.asarray(self.boxes, dtype=np.float64).reshape(-1, 4), confidence=self.confidence or None)
 
@@ -59,7 +66,7 @@ class Detections2D(Message):
             seq=seq,
             capture_ns=capture_ns,
             boxes=[tuple(map(float, b)) for b in boxes.xyxy],
-            confidence=[float(c) for c in boxes.confidence],
+            confidence=[float(c) for c in np.clip(boxes.confidence, 0.0, 1.0)],
         )
 
 
@@ -93,7 +100,8 @@ class CameraCylinders(Message):
 
     @classmethod
     def from_cylinders(cls, camera: str, seq: int, capture_ns: int, cyl: Cylinders) -> CameraCylinders:
-        finite = np.isfinite(cyl.xy).all(axis=1)
+        finite = np.isfinite(cyl.xy).all(axis=1) & np.isfinite(cyl.height) & np.isfinite(cyl.radius)
+        finite &= (cyl.height > 0) & (cyl.radius > 0)
         return cls(
             camera=camera,
             seq=seq,
@@ -148,6 +156,41 @@ class Occupancy(Message):
     zones: list[ZoneOccupancy] = Field(default_factory=list)
 
 
+# --- analytics results, served over REST ----------------------------------------------------------
+class CrowdedInterval(BaseModel):
+    """A stretch of time when a zone (or the whole site, ``zone`` None) held more than ``level``
+    people; short dips are merged into it. ``end_ns`` is None while it lasts."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    zone: str | None = None
+    level: Annotated[int, Field(ge=0)]
+    start_ns: Annotated[int, Field(ge=0)]
+    end_ns: Annotated[int, Field(ge=0)] | None = None
+    peak: Annotated[int, Field(ge=0)]
+    peak_ns: Annotated[int, Field(ge=0)]
+
+
+class TrajectoryPoint(BaseModel):
+    """One stored sample of a track's feet position."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    time_ns: Annotated[int, Field(ge=0)]
+    xy: Xy
+
+
+class Contact(BaseModel):
+    """Another track that came within ``limit_m`` of a traced track."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    track: int = Field(description="the other track's id")
+    first_ns: Annotated[int, Field(ge=0)]
+    last_ns: Annotated[int, Field(ge=0)]
+    duration_s: Annotated[float, Field(ge=0, allow_inf_nan=False)]
+    min_distance_m: Annotated[float, Field(ge=0, allow_inf_nan=False)]
+    closest_ns: Annotated[int, Field(ge=0)]
+    limit_m: Annotated[float, Field(gt=0)]
+
+
 # --- events --------------------------------------------------------------------------------------
 class EventBase(Message):
     """An alert. ``start_ns`` is when the condition began; ``end_ns`` is set once it is over, and the
@@ -165,6 +208,11 @@ class DistanceViolation(EventBase):
     min_distance_m: Annotated[float, Field(ge=0, allow_inf_nan=False)]
     limit_m: Annotated[float, Field(gt=0)]
     position: Xy | None = Field(default=None, description="midpoint of the pair at the closest approach")
+    group: bool = Field(
+        default=False,
+        description="the pair stayed close for group_after_s and is now taken as a group (a family, a couple): "
+        "this end message withdraws the alert, and the pair raises no more",
+    )
 
 
 class OverCapacity(EventBase):
@@ -196,3 +244,45 @@ EVENT_TYPES: tuple[str, ...] = ("distance_violation", "over_capacity", "calibrat
 
 def decode_event(payload: bytes | str) -> Event:
     return EVENT_ADAPTER.validate_json(payload)
+
+
+# --- to websocket and REST clients ---------------------------------------------------------------
+def iso_utc(time_ns: int) -> str:
+    """``time_ns`` (nanoseconds since the Unix epoch) as ISO-8601 UTC with milliseconds and a ``Z``."""
+    seconds, rest = divmod(int(time_ns), 1_000_000_000)
+    stamp = datetime.fromtimestamp(seconds, tz=timezone.utc).replace(microsecond=rest // 1000)
+    return stamp.isoformat(timespec="milliseconds").replace("+00:00", "Z")
+
+
+class AlertMessage(Message):
+    """An event as the gateway sends it on ``/ws/alerts`` and lists it over REST.
+
+    ``start``/``end`` are ISO-8601 UTC strings (``2024-05-01T12:00:00.250Z``) that browsers parse
+    directly; ``start_ns``/``end_ns`` keep the exact capture times. ``event`` is the full event.
+    """
+
+    id: str
+    type: Literal["distance_violation", "over_capacity", "calibration_drift", "camera_down", "camera_up"]
+    zone: str | None = None
+    tracks: list[int] = Field(default_factory=list)
+    start: str = Field(description="when the condition began, ISO-8601 UTC")
+    end: str | None = Field(default=None, description="when it ended, ISO-8601 UTC; null while active")
+    start_ns: Annotated[int, Field(ge=0)]
+    end_ns: Annotated[int, Field(ge=0)] | None = None
+    active: bool
+    event: Event
+
+    @classmethod
+    def from_event(cls, event: Event) -> AlertMessage:
+        return cls(
+            id=event.id,
+            type=event.type,
+            zone=event.zone,
+            tracks=list(event.tracks),
+            start=iso_utc(event.start_ns),
+            end=None if event.end_ns is None else iso_utc(event.end_ns),
+            start_ns=event.start_ns,
+            end_ns=event.end_ns,
+            active=event.end_ns is None,
+            event=event,
+        )

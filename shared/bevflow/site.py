@@ -221,6 +221,26 @@ class SiteError(ValueError):
     """A site file that cannot be used. ``str()`` is the message to show the user."""
 
 
+BUILTIN_SITES = Path(__file__).resolve().parent / "data" / "sites"
+
+
+def builtin_site_names() -> list[str]:
+    """Sites shipped with bevflow, usable by name wherever a site file is asked for."""
+    return sorted(p.stem for p in BUILTIN_SITES.glob("*.yaml"))
+
+
+def load_site_or_builtin(value: str | Path) -> Site:
+    """A site file, or the name of a site shipped with bevflow (``demo-hall``, ``example-hall``)."""
+    path = Path(value)
+    if not path.exists() and path.suffix == "" and len(path.parts) == 1:
+        shipped = BUILTIN_SITES / f"{value}.yaml"
+        if shipped.is_file():
+            return load_site(shipped)
+        raise SiteError(f"{value}: no such site file, and no built-in site of that name "
+                        f"(built-in: {', '.join(builtin_site_names())})")
+    return load_site(path)
+
+
 def load_site(path: str | Path) -> Site:
     path = Path(path)
     try:

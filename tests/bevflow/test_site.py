@@ -431,3 +431,15 @@ def test_example_hall_extrinsics_comment_matches_its_pose(example: Site) -> None
     rebuilt = Site.model_validate(raw).camera("hall-ne")
     np.testing.assert_allclose(rebuilt.center, example.camera("hall-ne").center, atol=1e-3)
     np.testing.assert_allclose(rebuilt.R, example.camera("hall-ne").R, atol=1e-4)
+
+
+def test_site_argument_is_a_file_or_a_shipped_name(tmp_path, monkeypatch) -> None:
+    import bevflow.site as site_module
+
+    (tmp_path / "hall-b.yaml").write_text(EXAMPLE_HALL.read_text())
+    monkeypatch.setattr(site_module, "BUILTIN_SITES", tmp_path)
+    assert site_module.builtin_site_names() == ["hall-b"]
+    by_name = site_module.load_site_or_builtin("hall-b")
+    assert by_name == site_module.load_site_or_builtin(str(tmp_path / "hall-b.yaml"))
+    with pytest.raises(site_module.SiteError, match="built-in: hall-b"):
+        site_module.load_site_or_builtin("hall-c")

@@ -16,8 +16,7 @@ from bevflow_services import bus
 from bevflow_services.gateway import GatewayState, create_app
 from bevflow_services.cli import UserError
 from bevflow_services.cli.serve import run_service
-from bevflow_services.gateway import main as gateway_main
-from bevflow_services.gateway.main import bus_feed, load_site_arg
+from bevflow_services.gateway.main import bus_feed
 from tests.services.gateway.feed import S, SITE_YAML, T0, occupancy, tracks, violation
 
 TIMEOUT_S = 10.0
@@ -103,7 +102,7 @@ def test_the_gateway_serves_what_the_bus_delivers(site: Site, sessions) -> None:
     ("argv", "message"),
     [
         (["--site", "no/such/site.yaml"], "cannot read the site file"),
-        (["--site", "no-such-built-in-site"], "cannot read the site file"),
+        (["--site", "no-such-built-in-site"], "no built-in site of that name"),
         (["--site", "{site}", "--mode", "client"], "client mode needs at least one --connect endpoint"),
     ],
 )
@@ -112,13 +111,6 @@ def test_bad_arguments_are_one_line_for_the_user(tmp_path, argv: list[str], mess
     site_file.write_text(SITE_YAML)
     with pytest.raises(UserError, match=message):
         run_service("gateway", [a.replace("{site}", str(site_file)) for a in argv])
-
-
-def test_site_argument_is_a_file_or_a_shipped_name(tmp_path, monkeypatch) -> None:
-    (tmp_path / "hall-b.yaml").write_text(SITE_YAML)
-    monkeypatch.setattr(gateway_main, "BUILTIN_SITES", tmp_path)
-    assert load_site_arg("hall-b").site == "hall"
-    assert load_site_arg(str(tmp_path / "hall-b.yaml")).site == "hall"
 
 
 def test_the_state_accepts_the_bus_site_id_as_well(site: Site) -> None:
