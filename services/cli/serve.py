@@ -11,7 +11,13 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import signal
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
 from types import ModuleType
+
+from bevflow.site import Site, SiteError, load_site_or_builtin
 
 from bevflow_services import bus
 from bevflow_services.cli import UserError
@@ -95,6 +101,30 @@ def service_parser(name: str, module: ModuleType) -> argparse.ArgumentParser:
         add_arguments(parser)
     parser.set_defaults(service=name)
     return parser
+
+
+@contextmanager
+def stop_on_signals() -> Iterator[threading.Event]:
+    """An event set by SIGINT or SIGTERM while the block runs; the previous handlers come back
+    after it. Wait on it with a timeout so the handler gets to run promptly on the main thread."""
+    stop = threading.Event()
+    previous = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield stop
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+def service_site(args: argparse.Namespace) -> tuple[Site, str]:
+    """The site a service runs for (``--site``: a file or a built-in name) and its bus name
+    (``--site-id``, by default the ``site`` field of the file), the same way for every service."""
+    try:
+        site = load_site_or_builtin(args.site)
+    except SiteError as exc:
+        raise UserError(str(exc)) from None
+    site_id = getattr(args, "site_id", None) or site.site
+    return site, site_id
 
 
 def parse_service_args(parser: argparse.ArgumentParser, argv: list[str]) -> argparse.Namespace:

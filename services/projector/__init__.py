@@ -1,0 +1,1 @@
+"""The projector service: 2D boxes to world cylinders."""

@@ -1,0 +1,84 @@
+"""Turn each camera's 2D person boxes into world cylinders with that camera's calibration.
+
+    bevflow serve projector --site site.yaml
+
+Subscribes to every camera's detections of the site and publishes one ``CameraCylinders`` per
+detections message. The fit is the paper's 3D cylinder estimation (``bevflow.cylinder``); its
+per-camera lookup tables are built on a camera's first message. Messages from cameras the site
+does not know are counted and skipped, never fatal. Under overload the oldest detections are
+dropped (counted), so what is published stays current.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+
+from bevflow.cylinder import METHODS, fit_cylinders
+from bevflow.schemas import CameraCylinders, Detections2D
+from bevflow.site import Site
+
+from bevflow_services import bus
+from bevflow_services.cli.serve import service_site, stop_on_signals
+
+log = logging.getLogger(__name__)
+SERVICE = "projector"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_argument_group("projector")
+    group.add_argument("--method", choices=METHODS, default="cylinder",
+                       help="how a box becomes a floor position (default: the paper's cylinder fit)")
+    group.add_argument("--queue", type=int, default=64,
+                       help="detections kept waiting before the oldest are dropped (default 64)")
+
+
+class Projector:
+    """The service's work, apart from the bus: one detections message in, cylinders out."""
+
+    def __init__(self, site: Site, method: str = "cylinder") -> None:
+        self.site = site
+        self.method = method
+        self.unknown_cameras: set[str] = set()
+
+    def project(self, message: Detections2D) -> CameraCylinders | None:
+        if message.camera not in self.site.built_cameras:
+            if message.camera not in self.unknown_cameras:
+                log.warning("detections from camera %r, which site %r does not have; skipping them",
+                            message.camera, self.site.site)
+                self.unknown_cameras.add(message.camera)
+            return None
+        index = self.site.camera_index(message.camera)
+        cylinders = fit_cylinders(self.site.camera(message.camera), message.to_boxes(), self.method,
+                                  camera_index=index)
+        return CameraCylinders.from_cylinders(message.camera, message.seq, message.capture_ns, cylinders)
+
+
+def main(args: argparse.Namespace) -> int:
+    site, site_id = service_site(args)
+    keys = bus.Keys(site_id)
+    projector = Projector(site, args.method)
+    stats = bus.BusStats()
+    session = bus.open_session(bus.config_from_args(args))
+    codec = bus.JsonCodec(CameraCylinders)
+    publications = {cam: bus.Publication(session, keys.cylinders(cam), codec) for cam in site.camera_ids}
+    inbox = bus.LatestSubscription(session, keys.detections("*"), bus.JsonCodec(Detections2D),
+                                   keep=args.queue, stats=stats)
+    token = bus.announce(session, keys, SERVICE)
+    print(f"bevflow projector: site {site_id!r}, {len(site.camera_ids)} cameras, method {args.method}", flush=True)
+    try:
+        with stop_on_signals() as stop:
+            while not stop.is_set():
+                message = inbox.take(timeout=0.2)
+                if message is None:
+                    continue
+                result = projector.project(message)
+                if result is not None:
+                    publications[result.camera].put(result)
+    finally:
+        token.undeclare()
+        inbox.close()
+        for publication in publications.values():
+            publication.close()
+        session.close()
+    return 0

@@ -1,0 +1,1 @@
+"""The tracker service: fusion, the one site tracker and the analytics."""

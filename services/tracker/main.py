@@ -1,0 +1,120 @@
+"""Fuse every camera's cylinders, track everyone in the site, and publish tracks, occupancy and
+alerts.
+
+    bevflow serve tracker --site site.yaml
+
+Camera results arrive on Zenoh threads, unsynchronised and sometimes late. They go into a
+``TickAssembler`` (capture-time slots, a bounded wait for late cameras); the main thread releases
+ready ticks in time order and steps the ``SiteTracker`` with each. A camera silent for
+``--camera-timeout`` seconds raises a ``camera_down`` alert, ended when it reports again.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import threading
+import time
+
+from bevflow.detections import Cylinders
+from bevflow.live.assembler import TickAssembler
+from bevflow.live.site_tracker import SiteTracker
+from bevflow.schemas import CameraCylinders, CameraHealthEvent, Event, Occupancy, Tracks
+
+from bevflow_services import bus
+from bevflow_services.cli.serve import service_site, stop_on_signals
+
+log = logging.getLogger(__name__)
+SERVICE = "tracker"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_argument_group("tracker")
+    group.add_argument("--tick-ms", type=float, default=100.0,
+                       help="length of one tracking tick; match the cameras' frame interval (default 100 = 10 fps)")
+    group.add_argument("--max-wait-ms", type=float, default=150.0,
+                       help="how long a tick waits for a late camera before it goes without it (default 150)")
+    group.add_argument("--camera-timeout", type=float, default=5.0,
+                       help="seconds of silence after which a camera is reported down (default 5)")
+    group.add_argument("--first-id", type=int, default=1,
+                       help="first track id (give the last run's next id to never reuse an id)")
+
+
+class CameraWatch:
+    """Per camera, when it last reported; ``check`` turns silences into down/up alerts."""
+
+    def __init__(self, cameras: list[str], timeout_ns: int, now_ns: int) -> None:
+        self.timeout_ns = timeout_ns
+        self.last_ns = dict.fromkeys(cameras, now_ns)
+        self.down: dict[str, CameraHealthEvent] = {}
+
+    def seen(self, camera: str, now_ns: int) -> None:
+        self.last_ns[camera] = now_ns
+
+    def check(self, now_ns: int) -> list[CameraHealthEvent]:
+        events = []
+        for camera, last in self.last_ns.items():
+            silent = now_ns - last > self.timeout_ns
+            if silent and camera not in self.down:
+                self.down[camera] = CameraHealthEvent(
+                    id=f"camera-{camera}-{last}", type="camera_down", camera=camera, start_ns=last,
+                    reason=f"no results for {self.timeout_ns / 1e9:.0f} s")
+                events.append(self.down[camera])
+            elif not silent and camera in self.down:
+                ended = self.down.pop(camera).model_copy(update={"end_ns": last})
+                events.append(ended)
+                events.append(CameraHealthEvent(id=f"{ended.id}-up", type="camera_up", camera=camera,
+                                                start_ns=last, end_ns=last))
+        return events
+
+
+def main(args: argparse.Namespace) -> int:
+    site, site_id = service_site(args)
+    keys = bus.Keys(site_id)
+    tracker = SiteTracker(site, first_id=args.first_id)
+    assembler: TickAssembler[CameraCylinders] = TickAssembler(
+        site.camera_ids, period_ns=int(args.tick_ms * 1e6), max_wait_ns=int(args.max_wait_ms * 1e6))
+    watch = CameraWatch(site.camera_ids, int(args.camera_timeout * 1e9), time.time_ns())
+    lock = threading.Lock()
+
+    def on_cylinders(message: CameraCylinders) -> None:  # on a Zenoh thread
+        with lock:
+            now = time.time_ns()
+            result = assembler.push(message.camera, message.capture_ns, message, now_ns=now)
+            if result == "accepted":
+                watch.seen(message.camera, now)
+        if result != "accepted":
+            log.debug("cylinders from %s at %d: %s", message.camera, message.capture_ns, result)
+
+    session = bus.open_session(bus.config_from_args(args))
+    stats = bus.BusStats()
+    tracks_out = bus.Publication(session, keys.tracks, bus.JsonCodec(Tracks))
+    occupancy_out = bus.Publication(session, keys.occupancy, bus.JsonCodec(Occupancy))
+    events_out = bus.Publication(session, keys.events, bus.JsonCodec(Event, "Event"), block_when_congested=True)
+    inbox = bus.subscribe(session, keys.cylinders("*"), bus.JsonCodec(CameraCylinders), on_cylinders, stats=stats)
+    token = bus.announce(session, keys, SERVICE)
+    print(f"bevflow tracker: site {site_id!r}, {len(site.camera_ids)} cameras, tick {args.tick_ms:g} ms", flush=True)
+    try:
+        with stop_on_signals() as stop:
+            while not stop.wait(0.01):
+                with lock:
+                    now = time.time_ns()
+                    ticks = assembler.pop_ready(now_ns=now)
+                    health = watch.check(now)
+                for event in health:
+                    events_out.put(event)
+                for tick in ticks:
+                    per_camera = {c: m.to_cylinders(site.camera_index(c)) for c, m in tick.items.items()}
+                    step = tracker.step(tick.time_ns, per_camera)
+                    tracks_out.put(step.tracks)
+                    occupancy_out.put(step.occupancy)
+                    for event in step.events:
+                        events_out.put(event)
+    finally:
+        token.undeclare()
+        inbox.close()
+        for publication in (tracks_out, occupancy_out, events_out):
+            publication.close()
+        session.close()
+        log.info("tracker stopped; next track id %d; assembler %s", tracker.tracker.next_id, dict(assembler.counts))
+    return 0

@@ -1,0 +1,65 @@
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bevflow.detections import Cylinders
+from bevflow.live.site_tracker import SiteTracker
+from bevflow.site import parse_site
+
+SITE = """
+site: hall
+cameras:
+  - {id: west, image_size: [1024, 1024], intrinsics: {fx: 300, fy: 300, cx: 511.5, cy: 511.5}, pose: {position: [0, 0, 4]}}
+  - {id: east, image_size: [1024, 1024], intrinsics: {fx: 300, fy: 300, cx: 511.5, cy: 511.5}, pose: {position: [6, 0, 4]}}
+zones:
+  - {id: middle, polygon: [[2, -3], [4, -3], [4, 3], [2, 3]], capacity: 1}
+thresholds: {violation_min_duration_s: 1.0, capacity_hysteresis: 0}
+"""
+S = 1_000_000_000
+T0 = 1_700_000_000 * S
+
+
+@pytest.fixture()
+def site():
+    return parse_site(SITE)
+
+
+def seen(*xy: tuple[float, float]) -> Cylinders:
+    return Cylinders(xy=np.array(xy, dtype=np.float64).reshape(-1, 2))
+
+
+def test_a_person_seen_by_two_cameras_is_one_track_seen_by_both(site) -> None:
+    tracker = SiteTracker(site)
+    for k in range(4):
+        step = tracker.step(T0 + k * S // 10, {"west": seen((3.0, 0.0)), "east": seen((3.1, 0.05))})
+    assert [t.cameras for t in step.tracks.tracks] == [["west", "east"]]
+    (track,) = step.tracks.tracks
+    assert track.xy == pytest.approx((3.05, 0.025), abs=0.05)
+    assert track.zones == ["middle"]
+    assert step.occupancy.total == 1 and step.occupancy.zones[0].count == 1
+
+
+def test_two_people_too_close_for_long_enough_raise_one_violation_and_over_capacity(site) -> None:
+    tracker = SiteTracker(site)
+    events = []
+    for k in range(25):  # 2.5 s at 10 Hz, both standing 1 m apart inside a zone of capacity 1
+        step = tracker.step(T0 + k * S // 10, {"west": seen((2.5, 0.0), (3.5, 0.0))})
+        events += step.events
+    types = [e.type for e in events]
+    assert types.count("distance_violation") == 1 and types.count("over_capacity") == 1
+    violation = next(e for e in events if e.type == "distance_violation")
+    assert violation.min_distance_m == pytest.approx(1.0, abs=0.05) and violation.zone == "middle"
+    assert step.tracks.violations == [tuple(sorted(violation.tracks))]
+
+
+def test_first_id_continues_a_previous_run(site) -> None:
+    tracker = SiteTracker(site, first_id=500)
+    for k in range(3):
+        step = tracker.step(T0 + k * S // 10, {"east": seen((5.0, 1.0))})
+    assert [t.id for t in step.tracks.tracks] == [500]
+
+
+def test_a_tick_without_cameras_is_valid(site) -> None:
+    step = SiteTracker(site).step(T0, {})
+    assert step.tracks.tracks == [] and step.occupancy.total == 0
