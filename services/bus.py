@@ -191,6 +191,11 @@ class Keys:
     def events(self) -> str:
         return f"{self.root}/events"
 
+    @property
+    def truth(self) -> str:
+        """Ground truth from a simulated ingest (``SimulatedTruth``)."""
+        return f"{self.root}/sim/truth"
+
     def alive(self, service: str = "*", instance: str = "*") -> str:
         return f"{self.root}/alive/{_chunk(service, 'service name')}/{_chunk(instance, 'instance id')}"
 

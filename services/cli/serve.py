@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import logging
 import signal
 import threading
 from collections.abc import Iterator
@@ -58,6 +59,7 @@ def run_service(name: str, argv: list[str], *, package: str = PACKAGE) -> int:
     """Parse ``argv`` with the service's parser and run its ``main``."""
     module = load_service(name, package=package)
     args = parse_service_args(service_parser(name, module), argv)
+    logging.basicConfig(level=args.log_level.upper(), format=f"%(asctime)s {name} %(levelname)s %(name)s: %(message)s")
     try:
         bus.config_from_args(args)  # bad bus flags fail here, before the service starts anything
         return int(module.main(args) or 0)
@@ -95,6 +97,8 @@ def service_parser(name: str, module: ModuleType) -> argparse.ArgumentParser:
                         help="announce the router among this site's live services" if is_router else
                         "the site's name on the bus, which all services of one site share "
                         "(default: the 'site' name in the site file)")
+    parser.add_argument("--log-level", default="info", choices=["debug", "info", "warning", "error"],
+                        help="how much the service logs (default info)")
     bus.add_bus_arguments(parser, mode=not is_router)
     add_arguments = getattr(module, "add_arguments", None)
     if add_arguments is not None:

@@ -72,7 +72,12 @@ def main(args: argparse.Namespace) -> int:
                 message = inbox.take(timeout=0.2)
                 if message is None:
                     continue
-                result = projector.project(message)
+                try:
+                    result = projector.project(message)
+                except Exception:  # a bug on one message must not stop the camera stream
+                    stats.count("handler_errors")
+                    log.exception("could not project detections %s/%d; skipping them", message.camera, message.seq)
+                    continue
                 if result is not None:
                     publications[result.camera].put(result)
     finally:

@@ -105,7 +105,12 @@ def main(args: argparse.Namespace) -> int:
                     events_out.put(event)
                 for tick in ticks:
                     per_camera = {c: m.to_cylinders(site.camera_index(c)) for c, m in tick.items.items()}
-                    step = tracker.step(tick.time_ns, per_camera)
+                    try:
+                        step = tracker.step(tick.time_ns, per_camera)
+                    except Exception:  # a bug on one tick must not stop the site
+                        stats.count("handler_errors")
+                        log.exception("tracking failed at tick %d; skipping it", tick.time_ns)
+                        continue
                     tracks_out.put(step.tracks)
                     occupancy_out.put(step.occupancy)
                     for event in step.events:

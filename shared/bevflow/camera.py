@@ -204,9 +204,13 @@ class FisheyeCamera(Camera):
         theta_d = np.asarray(theta_d, dtype=np.float64)
         top = self.max_theta
         theta = np.clip(theta_d, 0.0, top)
+        if not self.dist.any():  # equidistant lens: θd = θ
+            return np.where(theta_d <= top, theta, np.nan)
         for _ in range(iterations):
             t2 = theta * theta
             f = theta * (1.0 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4)))) - theta_d
+            if np.all(~(np.abs(f) > 1e-14)):  # converged everywhere (NaN rows never will)
+                break
             df = 1.0 + t2 * (3 * k1 + t2 * (5 * k2 + t2 * (7 * k3 + t2 * 9 * k4)))
             theta = np.clip(theta - f / np.where(np.abs(df) < 1e-12, 1e-12, df), 0.0, top)
         converged = np.abs(self.distort_theta(theta) - theta_d) <= 1e-9 * np.maximum(1.0, np.abs(theta_d))

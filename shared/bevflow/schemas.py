@@ -119,6 +119,17 @@ class CameraCylinders(Message):
         )
 
 
+class SimulatedTruth(Message):
+    """A simulated ingest's ground truth for one frame: the people on the monitored floor, with
+    the simulator's track ids. Lets tests and benchmarks score the live system end to end."""
+
+    site: str
+    frame: Annotated[int, Field(ge=0)]
+    capture_ns: Annotated[int, Field(ge=0)]
+    tracks: list[int] = Field(default_factory=list)
+    positions: list[Xy] = Field(default_factory=list)
+
+
 # --- site-wide, from the tracker ------------------------------------------------------------------
 class TrackState(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)

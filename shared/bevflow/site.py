@@ -303,6 +303,18 @@ def _describe(source: str, raw: dict[str, Any], err: Any) -> str:
     return f"{source}: {field}: {message}"
 
 
+class _SiteDumper(yaml.SafeDumper):
+    """Writes lists of numbers inline (``position: [6.5, 4.2, 5.5]``), as a person would."""
+
+
+def _represent_list(dumper: yaml.SafeDumper, value: list[Any]) -> yaml.Node:
+    flat = all(isinstance(v, (int, float)) for v in value)
+    return dumper.represent_sequence("tag:yaml.org,2002:seq", value, flow_style=flat)
+
+
+_SiteDumper.add_representer(list, _represent_list)
+
+
 def dump_site(site: Site) -> str:
     """YAML text of a site, in the field order of the models."""
-    return yaml.safe_dump(site.model_dump(mode="json", exclude_none=True), sort_keys=False)
+    return yaml.dump(site.model_dump(mode="json", exclude_none=True), Dumper=_SiteDumper, sort_keys=False)

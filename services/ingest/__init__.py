@@ -1,0 +1,1 @@
+"""The ingest service: cameras (streams, files, the simulator) onto the bus."""

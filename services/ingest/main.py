@@ -1,0 +1,128 @@
+"""Read the site's cameras and publish what they see.
+
+    bevflow serve ingest --site site.yaml                 # cameras with a `source` in the site file
+    bevflow serve ingest --site demo-hall --simulate      # the built-in simulator
+
+Real cameras: each camera's ``source`` (RTSP/HTTP URL, video file or image folder) is read on
+its own thread and its newest frame published with its capture time and sequence number; a
+camera that drops is reopened with backoff and the others go on. A slow network gets the latest
+frame, not a backlog: frames not yet sent are overwritten (counted).
+
+Simulation: a crowd walks through the site in real time and every camera reports the boxes of
+the people it sees, through the detector-noise model, straight onto the detections key (the
+stage a detector would fill), plus the simulator's ground truth for scoring. If the machine
+cannot keep up, late frames are skipped at the source and counted, never queued.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import time
+
+from bevflow.schemas import Detections2D, FrameHeader, SimulatedTruth
+from bevflow.sim.feed import LIVE_NOISE, SimulatedFeed, scene_for_site
+from bevflow.sim.noise import DetectorNoise
+from bevflow.site import Site
+
+from bevflow_services import bus
+from bevflow_services.cli import UserError
+from bevflow_services.cli.serve import service_site, stop_on_signals
+from bevflow_services.ingest.sources import LatestFrameReader
+
+log = logging.getLogger(__name__)
+SERVICE = "ingest"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_argument_group("ingest")
+    group.add_argument("--simulate", action="store_true",
+                       help="simulate a crowd and the cameras' detections instead of reading the cameras")
+    group.add_argument("--cameras", default="", help="comma-separated camera ids to serve (default: all)")
+    group.add_argument("--people", type=int, default=None, help="simulation: people on the floor at once")
+    group.add_argument("--seed", type=int, default=0, help="simulation: random seed")
+    group.add_argument("--jitter", type=float, default=LIVE_NOISE.jitter, help="simulation: box edge noise")
+    group.add_argument("--drop", type=float, default=LIVE_NOISE.drop, help="simulation: missed detections")
+    group.add_argument("--false-positives", type=float, default=LIVE_NOISE.false_positives,
+                       help="simulation: spurious boxes per camera per frame")
+    group.add_argument("--folder-fps", type=float, default=10.0, help="frame rate of image-folder sources")
+
+
+def main(args: argparse.Namespace) -> int:
+    site, site_id = service_site(args)
+    cameras = [c for c in args.cameras.split(",") if c] or site.camera_ids
+    unknown = sorted(set(cameras) - set(site.camera_ids))
+    if unknown:
+        raise UserError(f"--cameras: site {site.site!r} has no camera {', '.join(unknown)}")
+    session = bus.open_session(bus.config_from_args(args))
+    keys = bus.Keys(site_id)
+    token = bus.announce(session, keys, SERVICE)
+    try:
+        with stop_on_signals() as stop:
+            if args.simulate:
+                noise = DetectorNoise(jitter=args.jitter, drop=args.drop, false_positives=args.false_positives)
+                simulate(session, keys, site, cameras, noise, args, stop)
+            else:
+                stream(session, keys, site, cameras, args, stop)
+    finally:
+        token.undeclare()
+        session.close()
+    return 0
+
+
+def simulate(session, keys: bus.Keys, site: Site, cameras: list[str], noise: DetectorNoise,
+             args: argparse.Namespace, stop) -> None:
+    feed = SimulatedFeed(scene_for_site(site, people=args.people, seed=args.seed), noise, seed=args.seed)
+    codec = bus.JsonCodec(Detections2D)
+    publications = {c: bus.Publication(session, keys.detections(c), codec) for c in cameras}
+    truth_out = bus.Publication(session, keys.truth, bus.JsonCodec(SimulatedTruth))
+    period_ns = int(1e9 / feed.fps)
+    start_ns = time.time_ns()
+    skipped = 0
+    print(f"bevflow ingest: simulating {len(cameras)} cameras of {site.site!r} at {feed.fps:g} fps", flush=True)
+    for scene_frame, truth in feed.scene_frames():
+        due_ns = start_ns + scene_frame.index * period_ns
+        if stop.wait(max(0.0, (due_ns - time.time_ns()) / 1e9)):
+            break
+        if time.time_ns() - due_ns > period_ns:  # fell behind: drop this frame at the source
+            skipped += 1
+            if skipped % 100 == 1:
+                log.warning("simulation behind real time; %d frames skipped so far", skipped)
+            continue
+        frame = feed.observe(scene_frame, truth)
+        capture_ns = time.time_ns()
+        for camera in cameras:
+            boxes = frame.detections[site.camera_index(camera)]
+            publications[camera].put(Detections2D.from_boxes(camera, frame.index, capture_ns, boxes))
+        truth_out.put(SimulatedTruth(
+            site=site.site, frame=frame.index, capture_ns=capture_ns, tracks=truth.track_ids.tolist(),
+            positions=[(float(x), float(y)) for x, y in truth.feet_xy]))
+    for publication in [*publications.values(), truth_out]:
+        publication.close()
+
+
+def stream(session, keys: bus.Keys, site: Site, cameras: list[str], args: argparse.Namespace, stop) -> None:
+    sources = {c.id: c.source for c in site.cameras if c.id in cameras}
+    missing = sorted(c for c, s in sources.items() if not s)
+    if missing:
+        raise UserError(f"cameras {', '.join(missing)} have no 'source' in the site file; "
+                        "give each a stream URL, video file or image folder, or run with --simulate")
+    readers = {c: LatestFrameReader(s, folder_fps=args.folder_fps).start() for c, s in sources.items()}
+    publications = {c: bus.Publication(session, keys.frame(c), bus.FRAMES) for c in cameras}
+    print(f"bevflow ingest: reading {len(cameras)} cameras of {site.site!r}", flush=True)
+    while not stop.is_set():
+        idle = True
+        for camera, reader in readers.items():
+            frame = reader.take(timeout=0.0)
+            if frame is None:
+                continue
+            idle = False
+            h, w = frame.image.shape[:2]
+            header = FrameHeader(camera=camera, seq=frame.seq, capture_ns=frame.capture_ns, width=w, height=h)
+            publications[camera].put(bus.Frame(header, frame.image))
+        if idle:
+            stop.wait(0.005)
+    for reader in readers.values():
+        reader.stop()
+    for publication in publications.values():
+        publication.close()

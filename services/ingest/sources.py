@@ -1,0 +1,135 @@
+"""Camera sources: RTSP/HTTP streams, video files and image folders, read into BGR frames.
+
+A source is read on its own thread and only its newest frame is kept, so a slow consumer gets
+the latest picture, never a backlog. A stream that fails is reopened with exponential backoff
+(1 s doubling up to 30 s) and its state (``up``, ``reconnects``, ``last_error``) is visible for
+health reporting. Frames are stamped with their capture time as read (integer ns).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff"}
+
+
+@dataclass(frozen=True)
+class CapturedFrame:
+    seq: int
+    capture_ns: int
+    image: np.ndarray  # H x W x 3 uint8, BGR
+
+
+class SourceError(RuntimeError):
+    """A source that cannot be opened or read (the message names it)."""
+
+
+def read_frames(source: str, folder_fps: float = 10.0) -> Iterator[np.ndarray]:
+    """The frames of one source until it ends or breaks (``SourceError``)."""
+    path = Path(source)
+    if path.is_dir():
+        yield from _folder_frames(path, folder_fps)
+        return
+    capture = cv2.VideoCapture(source)
+    if not capture.isOpened():
+        raise SourceError(f"cannot open camera source {source!r}")
+    try:
+        while True:
+            ok, image = capture.read()
+            if not ok or image is None:
+                raise SourceError(f"camera source {source!r} stopped delivering frames")
+            yield image
+    finally:
+        capture.release()
+
+
+def _folder_frames(folder: Path, fps: float) -> Iterator[np.ndarray]:
+    files = sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+    if not files:
+        raise SourceError(f"image folder {folder} holds no images ({', '.join(sorted(IMAGE_SUFFIXES))})")
+    for file in files:
+        started = time.monotonic()
+        image = cv2.imread(str(file), cv2.IMREAD_COLOR)
+        if image is None:
+            log.warning("skipping %s: not a readable image", file)
+            continue
+        yield image
+        time.sleep(max(0.0, 1.0 / fps - (time.monotonic() - started)))
+    raise SourceError(f"image folder {folder} has no more images")
+
+
+class LatestFrameReader:
+    """Reads a source on a daemon thread, reconnecting with backoff; ``latest`` is the newest
+    frame not yet taken. ``loop=False`` stops at the end of a file or folder instead."""
+
+    def __init__(self, source: str, folder_fps: float = 10.0, loop: bool = True,
+                 backoff_s: tuple[float, float] = (1.0, 30.0)) -> None:
+        self.source = source
+        self.folder_fps = folder_fps
+        self.loop = loop
+        self.backoff_s = backoff_s
+        self.up = False
+        self.reconnects = 0
+        self.frames_read = 0
+        self.frames_overwritten = 0
+        self.last_error = ""
+        self._latest: CapturedFrame | None = None
+        self._ready = threading.Condition()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name=f"source {source}", daemon=True)
+
+    def start(self) -> LatestFrameReader:
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        with self._ready:
+            self._ready.notify_all()
+
+    def take(self, timeout: float) -> CapturedFrame | None:
+        with self._ready:
+            if self._latest is None:
+                self._ready.wait(timeout)
+            frame, self._latest = self._latest, None
+        return frame
+
+    def _run(self) -> None:
+        delay = self.backoff_s[0]
+        while not self._stop.is_set():
+            try:
+                for image in read_frames(self.source, self.folder_fps):
+                    self._publish(image)
+                    delay = self.backoff_s[0]
+                    if self._stop.is_set():
+                        return
+            except SourceError as exc:
+                self.last_error = str(exc)
+            except cv2.error as exc:
+                self.last_error = f"camera source {self.source!r}: {exc}"
+            self.up = False
+            if not self.loop:
+                return
+            log.warning("%s; retrying in %.0f s", self.last_error, delay)
+            self.reconnects += 1
+            self._stop.wait(delay)
+            delay = min(delay * 2, self.backoff_s[1])
+
+    def _publish(self, image: np.ndarray) -> None:
+        with self._ready:
+            if self._latest is not None:
+                self.frames_overwritten += 1
+            self._latest = CapturedFrame(self.frames_read, time.time_ns(), image)
+            self.frames_read += 1
+            self.up = True
+            self._ready.notify_all()
