@@ -212,6 +212,9 @@ class EventBase(Message):
     end_ns: Annotated[int, Field(ge=0)] | None = None
     zone: str | None = None
     tracks: list[int] = Field(default_factory=list)
+    raised_ns: Annotated[int, Field(ge=0)] | None = Field(
+        default=None, description="capture time of the data that raised (or ended) this message; "
+        "delivery time minus it is the alert's latency")
 
 
 class DistanceViolation(EventBase):

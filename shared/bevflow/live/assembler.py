@@ -4,7 +4,8 @@ Cameras are not synchronised and their results reach the tracker late, out of or
 all. The tracker needs one set of cylinders per tick, in time order. ``TickAssembler`` puts each
 camera message into the tick slot of its capture time and releases a slot once every expected
 camera has reported for it, or once ``max_wait_ns`` has passed since the slot ended, whichever
-comes first. So a dead camera delays the site by at most ``max_wait_ns`` and never stops it.
+comes first. Only cameras heard from in the last ``stale_ns`` are waited for, so a dead camera
+delays the site by at most ``max_wait_ns`` for a few seconds, then not at all, and never stops it.
 
 What does not fit is dropped and counted, never raised: a message for a slot already released
 (too late), a timestamp far in the future (a camera clock gone wrong), an unknown camera.
@@ -55,6 +56,7 @@ class TickAssembler(Generic[T]):
         period_ns: int = 100_000_000,
         max_wait_ns: int = 150_000_000,
         max_future_ns: int = 2_000_000_000,
+        stale_ns: int = 2_000_000_000,
     ) -> None:
         if period_ns <= 0 or max_wait_ns < 0:
             raise ValueError("period_ns must be positive and max_wait_ns non-negative")
@@ -62,6 +64,8 @@ class TickAssembler(Generic[T]):
         self.period_ns = period_ns
         self.max_wait_ns = max_wait_ns
         self.max_future_ns = max_future_ns
+        self.stale_ns = stale_ns
+        self._heard_ns: dict[str, int] = {}  # camera -> arrival time of its last accepted message
         self._slots: dict[int, Tick[T]] = {}
         self._released_until_ns: int | None = None  # every slot starting before this is gone
         self.counts: Counter[str] = Counter()
@@ -71,6 +75,7 @@ class TickAssembler(Generic[T]):
         self.counts[result] += 1
         if result != "accepted":
             return result
+        self._heard_ns[camera] = now_ns
         start = capture_ns - capture_ns % self.period_ns
         slot = self._slots.setdefault(start, Tick(start, self.period_ns))
         if capture_ns >= slot.capture_ns.get(camera, -1):
@@ -92,9 +97,10 @@ class TickAssembler(Generic[T]):
 
         Releasing a slot also releases every older one, so ticks always leave in time order."""
         ready_until: int | None = None
+        live = {c for c, heard in self._heard_ns.items() if now_ns - heard <= self.stale_ns}
         for start in sorted(self._slots):
             slot = self._slots[start]
-            complete = slot.items.keys() >= self.cameras
+            complete = slot.items.keys() >= live
             expired = now_ns >= slot.end_ns + self.max_wait_ns
             if complete or expired:
                 ready_until = slot.end_ns

@@ -58,7 +58,8 @@ class SiteTracker:
             tracks=self._track_states(table, self._cameras_of_fused(fusion, seen.camera), tick),
             violations=[(int(a), int(b)) for a, b in tick.violations],
         )
-        return SiteStep(tracks, tick.occupancy, tick.events, fusion, table, tick)
+        events = [e.model_copy(update={"raised_ns": time_ns}) for e in tick.events]
+        return SiteStep(tracks, tick.occupancy, events, fusion, table, tick)
 
     def _track_states(self, table: TrackTable, seen_by: list[list[str]], tick: AnalyticsTick) -> list[TrackState]:
         zones = tick.zones_by_track

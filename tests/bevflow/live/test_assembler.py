@@ -11,8 +11,17 @@ def make(cameras=("a", "b"), period_ms=100, wait_ms=150, future_ms=2000) -> Tick
     return TickAssembler(list(cameras), period_ns=period_ms * MS, max_wait_ns=wait_ms * MS, max_future_ns=future_ms * MS)
 
 
+def primed(cameras=("a", "b")) -> TickAssembler[str]:
+    """An assembler that has heard from every camera (in an earlier slot, already released)."""
+    a = make(cameras)
+    for c in cameras:
+        a.push(c, 900 * MS, "hello", now_ns=1000 * MS)
+    a.pop_ready(now_ns=1000 * MS)
+    return a
+
+
 def test_slot_released_as_soon_as_every_camera_reported() -> None:
-    a = make()
+    a = primed()
     assert a.push("a", 1010 * MS, "a1", now_ns=1020 * MS) == "accepted"
     assert a.pop_ready(now_ns=1020 * MS) == []
     a.push("b", 1050 * MS, "b1", now_ns=1060 * MS)
@@ -22,7 +31,7 @@ def test_slot_released_as_soon_as_every_camera_reported() -> None:
 
 
 def test_dead_camera_delays_by_at_most_max_wait() -> None:
-    a = make()
+    a = primed()
     a.push("a", 1010 * MS, "a1", now_ns=1010 * MS)
     assert a.pop_ready(now_ns=1249 * MS) == []  # slot ends at 1100, +150 ms wait
     (tick,) = a.pop_ready(now_ns=1250 * MS)
@@ -48,7 +57,7 @@ def test_rejections_are_classified_and_counted(camera: str, capture_ms: int, now
 
 
 def test_ticks_leave_in_time_order_even_when_a_newer_slot_completes_first() -> None:
-    a = make()
+    a = primed()
     a.push("a", 1010 * MS, "old-a", now_ns=1010 * MS)  # b never reports for slot 1000
     a.push("a", 1110 * MS, "new-a", now_ns=1110 * MS)
     a.push("b", 1120 * MS, "new-b", now_ns=1120 * MS)
@@ -77,3 +86,19 @@ def test_flush_returns_pending_slots_in_order() -> None:
 def test_invalid_configuration_is_refused() -> None:
     with pytest.raises(ValueError, match="period_ns"):
         TickAssembler(["a"], period_ns=0)
+
+
+def test_a_camera_never_heard_from_is_not_waited_for() -> None:
+    a = make()
+    a.push("a", 1010 * MS, "a1", now_ns=1010 * MS)
+    assert [t.items for t in a.pop_ready(now_ns=1010 * MS)] == [{"a": "a1"}]
+
+
+def test_a_camera_silent_for_longer_than_stale_is_no_longer_waited_for() -> None:
+    a = TickAssembler(["a", "b"], period_ns=100 * MS, max_wait_ns=150 * MS, stale_ns=1000 * MS)
+    a.push("b", 1010 * MS, "b-last-words", now_ns=1010 * MS)
+    a.push("a", 1020 * MS, "a1", now_ns=1020 * MS)
+    a.pop_ready(now_ns=1020 * MS)
+    a.push("a", 3010 * MS, "a2", now_ns=3010 * MS)  # b has been silent for 2 s
+    (tick,) = a.pop_ready(now_ns=3010 * MS)
+    assert tick.items == {"a": "a2"}

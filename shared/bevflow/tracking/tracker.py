@@ -1,0 +1,323 @@
+"""The one world tracker: every person on the site, from fused floor cylinders (paper 3.7).
+
+Each ``update(cylinders, time_s)`` runs, for all tracks at once:
+
+1. **predict** every track to ``time_s`` with a constant-velocity Kalman filter;
+2. **associate** detections to tracks by feet distance, gated: confirmed tracks take the strong
+   detections first, then tentative tracks take what is left, then confirmed tracks still
+   unmatched may take a weak (low-score) detection within a tighter gate (ByteTrack's second
+   pass: a person half hidden still continues their track, but never starts one);
+3. **update** the matched tracks (Kalman on the feet, moving averages on height and radius);
+4. **birth** a tentative track for every strong detection left over;
+5. **retire** confirmed tracks after ``max_misses`` consecutive misses, tentative ones after
+   ``tentative_max_misses`` (a false positive that appears once dies before it could be
+   confirmed).
+
+A tentative track becomes confirmed after ``activate_hits`` associated detections and only then
+gets an id, so ids are never spent on false positives. Ids are unique for the life of the
+tracker (``reset()`` keeps counting) and ``first_id`` lets a restarted tracker continue after
+the last id it published. There is no global state: two trackers never share anything.
+
+Association cost is the Euclidean feet distance to the predicted position, as in the paper.
+Each pass is solved exactly by ``bevflow.metrics.matching.assign_edges``: only pairs within the
+gate are considered (found with a k-d tree), a pair with no rival is matched outright and the
+contested rest goes to one sparse assignment solve, minimising the total distance plus
+``gate`` for every track and detection left over. 1,000 people therefore cost about 3 ms per
+update rather than a dense 1,000 × 1,000 Hungarian solve.
+
+Reported tracks: ``update`` returns the confirmed tracks matched in this update, and those
+coasting (missed) for at most ``report_max_misses`` consecutive updates, at their predicted
+position. Reporting a coasting track bridges a missed detection (occlusion, a detector miss):
+fewer misses and fragmentations, at the price of a false positive where the person really left.
+One update of coasting scored best overall. Against reporting matched tracks only, MOTA goes
+0.885 → 0.969 at 10 fps and 0.781 → 0.804 at 2 fps on simulated walkers (0.1 people/m²,
+10 % of detections missed, 0.1 m noise), and 0.773 → 0.799 on the WILDTRACK ground truth
+(2 fps) given the same noise and misses. Two updates gain 0.006 more at 10 fps but lose 0.021
+at 2 fps, where a coasting person has moved on by 0.6 m.
+
+>>> tracker = Tracker(TrackerConfig(activate_hits=2))
+>>> for t in (0.0, 0.1, 0.2):
+...     tracks = tracker.update(Cylinders(xy=np.array([[1.0 + t, 2.0]])), t)
+>>> tracks.id.tolist(), tracks.hits.tolist()
+([1], [3])
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+from numpy.typing import NDArray
+
+from bevflow.detections import Cylinders
+from bevflow.metrics.matching import assign_edges, gated_pairs
+from bevflow.tracking.kalman import ConstantVelocityKalman, smooth
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+BoolArray = NDArray[np.bool_]
+
+
+@dataclass(frozen=True)
+class TrackerConfig:
+    """Tracker settings. Distances in metres, speeds in m/s.
+
+    - ``gate_m``: farthest a strong detection may be from a track's predicted feet.
+    - ``activate_hits``: associated detections before a track is confirmed (paper: 3).
+    - ``max_misses``: consecutive updates without a detection that retire a confirmed track
+      (paper: 5); ``tentative_max_misses`` the same for tracks not yet confirmed.
+    - ``weak_score``: detections scoring below it are weak: they may only continue a confirmed
+      track, within ``weak_gate_m``. ``min_score``: detections below it are ignored.
+    - ``process_noise`` (m²/s³), ``measurement_std_m``, ``initial_speed_std_mps``: the Kalman
+      filter's noise (see ``bevflow.tracking.kalman``). The defaults scored best of a sweep on
+      the WILDTRACK ground truth with 0.1 m of added noise and on simulated walkers at 2 and
+      10 fps; 0.2 m also matches the paper's position error of fused cylinders (0.06–0.19 m).
+    - ``shape_smoothing``: weight of a new measurement in the height and radius averages.
+    - ``report_max_misses``: confirmed tracks missed in more consecutive updates than this are
+      kept but not returned by ``update`` (0 returns only tracks matched in this update).
+    """
+
+    gate_m: float = 1.5
+    activate_hits: int = 3
+    max_misses: int = 5
+    tentative_max_misses: int = 2
+    weak_score: float = 0.3
+    weak_gate_m: float = 0.75
+    min_score: float = 0.0
+    process_noise: float = 0.3
+    measurement_std_m: float = 0.2
+    initial_speed_std_mps: float = 1.0
+    shape_smoothing: float = 0.3
+    report_max_misses: int = 1
+
+    def __post_init__(self) -> None:
+        for name in ("gate_m", "weak_gate_m", "measurement_std_m", "initial_speed_std_mps"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"TrackerConfig.{name} must be > 0, got {getattr(self, name)}")
+        for name in ("activate_hits", "max_misses", "tentative_max_misses"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"TrackerConfig.{name} must be >= 1, got {getattr(self, name)}")
+        if self.process_noise < 0 or self.report_max_misses < 0:
+            raise ValueError("TrackerConfig.process_noise and report_max_misses must be >= 0")
+        if not 0 <= self.shape_smoothing <= 1:
+            raise ValueError(f"TrackerConfig.shape_smoothing must be in [0, 1], got {self.shape_smoothing}")
+
+    @classmethod
+    def from_thresholds(cls, thresholds: object, **overrides: object) -> TrackerConfig:
+        """Settings from a site's ``Thresholds`` (track_gate_m, track_activate_hits,
+        track_max_misses); ``overrides`` set any other field."""
+        return cls(
+            gate_m=thresholds.track_gate_m,  # type: ignore[attr-defined]
+            activate_hits=thresholds.track_activate_hits,  # type: ignore[attr-defined]
+            max_misses=thresholds.track_max_misses,  # type: ignore[attr-defined]
+            **overrides,  # type: ignore[arg-type]
+        )
+
+    def kalman(self) -> ConstantVelocityKalman:
+        return ConstantVelocityKalman(self.process_noise, self.measurement_std_m, self.initial_speed_std_mps)
+
+
+@dataclass(frozen=True, eq=False)
+class TrackTable:
+    """Tracks as columns of equal length T.
+
+    ``id`` (T,) (−1 while tentative), ``xy`` (T, 2) feet position and ``velocity`` (T, 2) from
+    the filter, ``height`` and ``radius`` (T,) smoothed, ``hits`` (T,) associated detections so
+    far, ``misses`` (T,) consecutive updates without one, ``age_s`` (T,) time since birth,
+    ``detection`` (T,) index of the input cylinder that updated the track in this update or −1,
+    ``confirmed`` (T,)."""
+
+    id: IntArray
+    xy: FloatArray
+    velocity: FloatArray
+    height: FloatArray
+    radius: FloatArray
+    hits: IntArray
+    misses: IntArray
+    age_s: FloatArray
+    detection: IntArray
+    confirmed: BoolArray
+
+    @classmethod
+    def empty(cls) -> TrackTable:
+        return cls(
+            id=np.zeros(0, np.int64), xy=np.zeros((0, 2)), velocity=np.zeros((0, 2)), height=np.zeros(0),
+            radius=np.zeros(0), hits=np.zeros(0, np.int64), misses=np.zeros(0, np.int64), age_s=np.zeros(0),
+            detection=np.zeros(0, np.int64), confirmed=np.zeros(0, bool),
+        )  # fmt: skip
+
+    def __len__(self) -> int:
+        return len(self.id)
+
+    def __getitem__(self, index: object) -> TrackTable:
+        return TrackTable(**{f.name: getattr(self, f.name)[index] for f in fields(self)})
+
+
+@dataclass(eq=False)
+class _Tracks:
+    """Every live track, tentative ones included (columns of equal length)."""
+
+    id: IntArray = field(default_factory=lambda: np.zeros(0, np.int64))
+    state: FloatArray = field(default_factory=lambda: np.zeros((0, 4)))
+    covariance: FloatArray = field(default_factory=lambda: np.zeros((0, 4, 4)))
+    height: FloatArray = field(default_factory=lambda: np.zeros(0))
+    radius: FloatArray = field(default_factory=lambda: np.zeros(0))
+    hits: IntArray = field(default_factory=lambda: np.zeros(0, np.int64))
+    misses: IntArray = field(default_factory=lambda: np.zeros(0, np.int64))
+    born_s: FloatArray = field(default_factory=lambda: np.zeros(0))
+    detection: IntArray = field(default_factory=lambda: np.zeros(0, np.int64))
+    confirmed: BoolArray = field(default_factory=lambda: np.zeros(0, bool))
+
+    def __len__(self) -> int:
+        return len(self.id)
+
+    def select(self, keep: BoolArray) -> _Tracks:
+        return _Tracks(**{f.name: getattr(self, f.name)[keep] for f in fields(self)})
+
+    def append(self, other: _Tracks) -> _Tracks:
+        columns = {f.name: np.concatenate([getattr(self, f.name), getattr(other, f.name)]) for f in fields(self)}
+        return _Tracks(**columns)
+
+    def table(self, time_s: float) -> TrackTable:
+        # Copies: the tracker updates its columns in place, a published table must not change.
+        return TrackTable(
+            id=self.id.copy(), xy=self.state[:, :2].copy(), velocity=self.state[:, 2:].copy(),
+            height=self.height.copy(), radius=self.radius.copy(), hits=self.hits.copy(),
+            misses=self.misses.copy(), age_s=time_s - self.born_s, detection=self.detection.copy(),
+            confirmed=self.confirmed.copy(),
+        )
+
+
+class Tracker:
+    """One online tracker for a whole site; see the module docstring."""
+
+    def __init__(self, config: TrackerConfig | None = None, first_id: int = 1) -> None:
+        self.config = config or TrackerConfig()
+        self._kalman = self.config.kalman()
+        self._next_id = int(first_id)
+        self._tracks = _Tracks()
+        self._time_s: float | None = None
+
+    @property
+    def next_id(self) -> int:
+        """The id the next confirmed track will get (pass it as ``first_id`` on restart)."""
+        return self._next_id
+
+    @property
+    def time_s(self) -> float | None:
+        """Time of the last update, None before the first."""
+        return self._time_s
+
+    def reset(self) -> None:
+        """Forget every track and the clock; ids keep counting from where they were."""
+        self._tracks = _Tracks()
+        self._time_s = None
+
+    def tracks(self, include_tentative: bool = False) -> TrackTable:
+        """Every live track after the last update (confirmed ones, or all of them)."""
+        tracks = self._tracks if include_tentative else self._tracks.select(self._tracks.confirmed)
+        return tracks.table(self._time_s if self._time_s is not None else 0.0)
+
+    def update(self, cylinders: Cylinders, time_s: float) -> TrackTable:
+        """Advance to ``time_s`` (seconds, never decreasing) with the fused cylinders seen then,
+        and return the confirmed tracks to report (see ``TrackerConfig.report_max_misses``)."""
+        dt = self._advance_clock(time_s)
+        cfg = self.config
+        tracks = self._tracks
+        if len(tracks):
+            tracks.state, tracks.covariance = self._kalman.predict(tracks.state, tracks.covariance, dt)
+        tracks.detection = np.full(len(tracks), -1, dtype=np.int64)
+
+        usable = np.isfinite(cylinders.xy).all(axis=1) & (cylinders.score >= cfg.min_score)
+        strong = usable & (cylinders.score >= cfg.weak_score)
+        weak = usable & ~strong
+        taken = np.zeros(len(cylinders), dtype=bool)
+        # Every (track, detection) pair within the wider gate, found once for all three passes.
+        det_xy = np.where(usable[:, None], cylinders.xy, np.nan)
+        pairs = gated_pairs(tracks.state[:, :2], det_xy, max(cfg.gate_m, cfg.weak_gate_m))
+        passes = (
+            (tracks.confirmed, strong, cfg.gate_m),
+            (~tracks.confirmed, strong, cfg.gate_m),
+            (tracks.confirmed, weak, cfg.weak_gate_m),
+        )
+        for track_ok, det_ok, gate in passes:
+            self._associate(pairs, track_ok & (tracks.detection < 0), det_ok & ~taken, gate)
+            taken[tracks.detection[tracks.detection >= 0]] = True
+
+        self._correct(cylinders)
+        self._confirm()
+        self._retire()
+        self._birth(cylinders, strong & ~taken, time_s)
+        report = self._tracks.confirmed & (self._tracks.misses <= cfg.report_max_misses)
+        return self._tracks.select(report).table(time_s)
+
+    def _advance_clock(self, time_s: float) -> float:
+        time_s = float(time_s)
+        if not math.isfinite(time_s):
+            raise ValueError(f"time_s must be a finite number of seconds, got {time_s}")
+        if self._time_s is not None and time_s < self._time_s:
+            raise ValueError(
+                f"time went backwards: update at t={time_s:.6f} s after one at t={self._time_s:.6f} s; "
+                "feed the tracker in capture-time order"
+            )
+        dt = 0.0 if self._time_s is None else time_s - self._time_s
+        self._time_s = time_s
+        return dt
+
+    def _associate(
+        self, pairs: tuple[IntArray, IntArray, FloatArray], track_ok: BoolArray, det_ok: BoolArray, gate: float
+    ) -> None:
+        """Match candidate tracks to candidate detections among ``pairs`` (track, detection,
+        distance) within ``gate``; writes ``detection`` of the matched tracks."""
+        track, det, dist = pairs
+        allowed = track_ok[track] & det_ok[det] & (dist <= gate)
+        if not allowed.any():
+            return
+        # A track or detection left over costs the gate: any pair within it is worth making.
+        r, c = assign_edges(
+            track[allowed], det[allowed], dist[allowed], len(track_ok), len(det_ok), unmatched_cost=gate
+        )
+        self._tracks.detection[r] = c
+
+    def _correct(self, cylinders: Cylinders) -> None:
+        tracks, weight = self._tracks, self.config.shape_smoothing
+        hit = tracks.detection >= 0
+        det = tracks.detection[hit]
+        if len(det):
+            tracks.state[hit], tracks.covariance[hit] = self._kalman.update(
+                tracks.state[hit], tracks.covariance[hit], cylinders.xy[det]
+            )
+            tracks.height[hit] = smooth(tracks.height[hit], cylinders.height[det], weight)
+            tracks.radius[hit] = smooth(tracks.radius[hit], cylinders.radius[det], weight)
+        tracks.hits[hit] += 1
+        tracks.misses[hit] = 0
+        tracks.misses[~hit] += 1
+
+    def _confirm(self) -> None:
+        tracks = self._tracks
+        new = ~tracks.confirmed & (tracks.hits >= self.config.activate_hits)
+        # Ids go in order of birth, so they are reproducible for a given input.
+        order = np.flatnonzero(new)
+        tracks.id[order] = self._next_id + np.arange(len(order))
+        self._next_id += len(order)
+        tracks.confirmed[new] = True
+
+    def _retire(self) -> None:
+        tracks, cfg = self._tracks, self.config
+        limit = np.where(tracks.confirmed, cfg.max_misses, cfg.tentative_max_misses)
+        self._tracks = tracks.select(tracks.misses < limit)
+
+    def _birth(self, cylinders: Cylinders, unmatched: BoolArray, time_s: float) -> None:
+        det = np.flatnonzero(unmatched)
+        if len(det) == 0:
+            return
+        state, covariance = self._kalman.initiate(cylinders.xy[det])
+        n = len(det)
+        born = _Tracks(
+            id=np.full(n, -1, np.int64), state=state, covariance=covariance, height=cylinders.height[det].copy(),
+            radius=cylinders.radius[det].copy(), hits=np.ones(n, np.int64), misses=np.zeros(n, np.int64),
+            born_s=np.full(n, time_s), detection=det.astype(np.int64), confirmed=np.zeros(n, bool),
+        )  # fmt: skip
+        self._tracks = self._tracks.append(born)
+        self._confirm()
