@@ -1,0 +1,1 @@
+"""Benchmarks of whole services (the core library has its own under scripts/)."""
