@@ -7,13 +7,14 @@ import asyncio
 import json
 import threading
 import time
+import urllib.error
 import urllib.request
 from pathlib import Path
 
 import pytest
 import websockets
 
-from bevflow.schemas import SimulatedTruth
+from bevflow.schemas import CameraCylinders, Detections2D, SimulatedTruth
 
 from bevflow_services import bus
 from bevflow_services.launcher import ServiceGroup, free_port, start_pipeline
@@ -109,3 +110,41 @@ def test_a_distance_alert_arrives_on_the_websocket(live) -> None:
     assert alert["type"] == "distance_violation"
     assert len(alert["tracks"]) == 2 and alert["start"]
     assert "zone" in alert
+
+
+def test_garbage_on_the_bus_and_bad_requests_do_not_stop_the_stream(live) -> None:
+    base, truth, group = live
+    keys = bus.Keys("demo-hall")
+    now = time.time_ns()
+    session = truth.session
+    garbage = [
+        (keys.detections("hall-1"), b"\x00\xffnot json"),
+        (keys.detections("hall-2"), b'{"schema_version": 1, "camera": "hall-2"}'),
+        (keys.detections("no-such-camera"), Detections2D(camera="no-such-camera", seq=1, capture_ns=now,
+                                                         boxes=[(1, 2, 30, 60)]).model_dump_json().encode()),
+        (keys.cylinders("hall-3"), CameraCylinders(camera="hall-3", seq=1, capture_ns=now + 3600 * 10**9).model_dump_json().encode()),
+        (keys.cylinders("hall-4"), CameraCylinders(camera="hall-4", seq=1, capture_ns=now - 3600 * 10**9).model_dump_json().encode()),
+        (keys.cylinders("hall-5"), b'{"schema_version": 99}'),
+        (keys.events, b"[1, 2, 3]"),
+        (keys.tracks, b'{"site": "demo-hall"}'),
+    ]
+    before = get_json(f"{base}/api/occupancy")["time_ns"]
+    for _ in range(5):
+        for key, payload in garbage:
+            session.put(key, payload)
+        time.sleep(0.2)
+    for path, status in [("/api/occupancy/history?since=10&until=5", 400), ("/api/tracks/abc", 422),
+                         ("/api/occupancy/history?zone=nowhere", 404), ("/api/violations?limit=-1", 422)]:
+        try:
+            urllib.request.urlopen(f"{base}{path}", timeout=5)
+            code = 200
+        except urllib.error.HTTPError as exc:
+            code = exc.code
+        assert code == status, path
+    time.sleep(2)
+    assert not group.dead(), [c.name for c in group.dead()]
+    after = get_json(f"{base}/api/occupancy")
+    assert after["time_ns"] > before and after["total"] > 0
+    health = get_json(f"{base}/api/health")
+    assert {"ingest", "projector", "tracker", "gateway"} <= {s["name"] for s in health["services"]}
+    assert sum(health["bus"]["rejected"].values()) > 0  # the gateway saw and refused its share
