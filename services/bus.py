@@ -5,7 +5,7 @@ configured (``BusConfig``, ``add_bus_arguments``), where each message goes (``Ke
 encoded (JSON for :mod:`bevflow.schemas` messages, raw pixels plus a JSON header for frames), how
 received samples reach the code that wants them, and which services are up (liveliness).
 
-Zenoh calls subscribers back on its own threads and has no asyncio API. Three ways to receive:
+Zenoh calls subscribers back on its own threads and has no asyncio API. Four ways to receive:
 
 - ``subscribe``: a plain callback, run on a Zenoh thread; for quick handlers.
 - ``AsyncSubscription``: decoded messages go to an event loop through ``call_soon_threadsafe``
@@ -13,6 +13,8 @@ Zenoh calls subscribers back on its own threads and has no asyncio API. Three wa
   memory grow and always sees recent data.
 - ``LatestSubscription``: a blocking ``take()`` for a worker thread that only ever wants the newest
   sample (a detector that is slower than its camera); older samples are dropped, not queued.
+- ``HistorySubscription``: a plain callback that also receives what a ``CachedPublication`` kept
+  while it was not running (alerts for the recorder); messages may arrive twice.
 
 A bad payload never raises inside a Zenoh callback: it is counted in ``BusStats`` by reason and
 logged (at most once per reason per ``log_every_s``), and the stream goes on.
@@ -43,6 +45,7 @@ from typing import Any, Generic, Literal, Protocol, TypeVar
 
 import numpy as np
 import zenoh
+import zenoh.ext
 from pydantic import TypeAdapter, ValidationError
 
 from bevflow.schemas import SCHEMA_VERSION, FrameHeader
@@ -426,6 +429,44 @@ def _undeclare(entity: Any) -> None:
         pass
 
 
+class CachedPublication(Generic[M]):
+    """A publisher that keeps its last ``cache`` messages, so a subscriber that joins late or
+    restarts (a ``HistorySubscription``) receives what it missed; for rare messages that must not
+    be lost (alerts). It blocks on a congested link instead of dropping, and sends a sequence-number
+    heartbeat every ``heartbeat_s`` so subscribers also detect and fetch a lost last message.
+
+    Built on Zenoh's advanced publisher (an API Zenoh marks unstable). Plain subscribers receive
+    its messages like any other. Open the session with ``BusConfig(timestamping=True)``: cached
+    replies carry their timestamps."""
+
+    def __init__(self, session: zenoh.Session, key: str, codec: Codec[M], *, cache: int = 10_000,
+                 heartbeat_s: float = 1.0) -> None:
+        if cache < 1:
+            raise ValueError("cache must hold at least 1 message")
+        self.key = key
+        self._codec = codec
+        block = zenoh.CongestionControl.BLOCK
+        self._publisher = zenoh.ext.declare_advanced_publisher(
+            session, key, congestion_control=block,
+            cache=zenoh.ext.CacheConfig(cache, replies_config=zenoh.ext.RepliesConfig(congestion_control=block)),
+            sample_miss_detection=zenoh.ext.MissDetectionConfig(heartbeat=heartbeat_s, sporadic_heartbeat=None),
+            publisher_detection=True,
+        )
+
+    def put(self, message: M) -> None:
+        payload, attachment, encoding = self._codec.encode(message)
+        self._publisher.put(payload, attachment=attachment, encoding=encoding)
+
+    def close(self) -> None:
+        _undeclare(self._publisher)
+
+    def __enter__(self) -> CachedPublication[M]:
+        return self
+
+    def __exit__(self, *_exc: object) -> None:
+        self.close()
+
+
 # --- subscribing ---------------------------------------------------------------------------------
 class Subscription(Generic[M]):
     """A subscriber that decodes each sample with ``codec`` and passes it to ``on_message`` on a
@@ -556,6 +597,26 @@ class LatestSubscription(Subscription[M]):
             message = self._decode(sample)
             if message is not None:
                 return message
+
+
+class HistorySubscription(Subscription[M]):
+    """A callback subscription that also receives what ``CachedPublication`` publishers still
+    cache: everything they kept when it starts (and when a publisher starts later), and any message
+    it missed while running (found by sequence numbers and heartbeats, then fetched again). So a
+    message can arrive twice; consumers must be idempotent (update by id). Messages from plain
+    publishers arrive too, without that recovery. ``on_message`` runs on a Zenoh thread."""
+
+    def __init__(self, session: zenoh.Session, key: str, codec: Codec[M], on_message: Callable[[M], object],
+                 *, stats: BusStats | None = None) -> None:
+        self.key = key
+        self.codec = codec
+        self.stats = stats if stats is not None else BusStats()
+        self._on_message = on_message
+        self._subscriber = zenoh.ext.declare_advanced_subscriber(
+            session, key, self._on_sample,
+            history=zenoh.ext.HistoryConfig(detect_late_publishers=True),
+            recovery=zenoh.ext.RecoveryConfig(heartbeat=True, periodic_queries=None),
+        )
 
 
 # --- liveliness ----------------------------------------------------------------------------------

@@ -4,13 +4,21 @@ Starts the real services (ingest simulating N cameras at 10 fps, projector, trac
 as separate processes, subscribes to ``/ws/tracks`` and ``/ws/alerts`` like a client would, and
 measures for every message its delivery time minus the capture time it carries: ``Tracks.time_ns``
 (the newest capture in the tick) and an alert's ``raised_ns`` (the capture time of the tick that
-raised it). Frames dropped at the source are counted from gaps in the ground-truth frame numbers.
+raised it). Frames dropped at the source are counted from gaps in the ground-truth frame numbers,
+and each service's CPU use is read from ``/proc`` (in cores: 1.0 is one core busy all the time).
+
+``max_cameras`` raises the number of simulated 10 fps cameras until the machine no longer keeps
+up: frames are dropped at the source, ticks come out late (tracks p99 over a bound), or fewer
+ticks come out than the cameras' frame rate. The simulated ingest publishes the boxes a detector
+would, so this is the system without the detector's own cost.
 """
 
 from __future__ import annotations
 
 import asyncio
 import json
+import math
+import os
 import statistics
 import tempfile
 import threading
@@ -20,33 +28,53 @@ from pathlib import Path
 import websockets
 
 from bevflow.schemas import SimulatedTruth
-from bevflow.site import dump_site, load_site_or_builtin
+from bevflow.site import Site, dump_site, load_site_or_builtin
 
 from bevflow_services import bus
+from bevflow_services.benchmarks.timing import percentile
 from bevflow_services.launcher import ServiceGroup, free_port, start_pipeline
 
-# A 2 x 2 block of the demo hall's cameras, over the floor they cover.
-FOUR_CAMERAS = ("hall-1", "hall-2", "hall-4", "hall-5")
+FPS = 10
+# The demo hall's camera grid, 13.3 m by 8.3 m apart, continued as far as the cameras asked for.
+SPACING_M = (40.0 / 3, 8.3)
+ORIGIN_M = (40.0 / 6, 4.2)
+PEOPLE_PER_CAMERA = 7.5  # the 4-camera block of the demo hall holds about 30 people
+LATENCY_BOUND_MS = 150.0  # issue 8's target for frame-to-alert p99
 
 
-def four_camera_site(folder: Path) -> Path:
+def hall_site(cameras: int) -> Site:
+    """``cameras`` of the demo hall's fisheyes in a near-square grid at the hall's spacing; four
+    cameras stand where the demo hall's hall-1, hall-2, hall-4 and hall-5 do."""
     hall = load_site_or_builtin("demo-hall")
-    cams = [c for c in hall.cameras if c.id in FOUR_CAMERAS]
-    site = hall.model_copy(update={"site": "bench-4", "cameras": cams, "zones": hall.zones[:2], "floor": (0.0, 0.0, 27.0, 17.0)})
-    path = folder / "bench-4.yaml"
-    path.write_text(dump_site(site))
-    return path
+    template = hall.cameras[0]
+    cols = math.ceil(math.sqrt(cameras))
+    rows = math.ceil(cameras / cols)
+    configs = []
+    for k in range(cameras):
+        x, y = ORIGIN_M[0] + (k % cols) * SPACING_M[0], ORIGIN_M[1] + (k // cols) * SPACING_M[1]
+        pose = template.pose.model_copy(update={"position": (x, y, template.pose.position[2]),  # type: ignore[union-attr]
+                                                "yaw_deg": (37.0 * k) % 360})
+        configs.append(template.model_copy(update={"id": f"cam-{k + 1}", "pose": pose}))
+    floor = (0.0, 0.0, round(cols * SPACING_M[0], 1), round(rows * SPACING_M[1], 1))
+    return hall.model_copy(update={"site": f"bench-{cameras}", "cameras": configs, "zones": hall.zones[:2], "floor": floor})
 
 
-def percentile(values: list[float], q: float) -> float:
-    if not values:
-        return float("nan")
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, int(round(q / 100 * (len(ordered) - 1))))]
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU seconds a process has used so far (Linux ``/proc``; NaN elsewhere)."""
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            fields = stat.read().rsplit(")", 1)[1].split()
+    except OSError:
+        return math.nan
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-async def _listen(url: str, latencies: list[float], stamp: str, until: float) -> None:
+async def _listen(url: str, latencies: list[float], stamp: str, until: float, kinds: dict[str, int] | None = None) -> None:
+    """Record delivery minus ``stamp`` of every message on ``url`` until ``until`` (monotonic)
+    captured after this client connected: ``/ws/tracks`` first replays the latest tick, whose age
+    is not a latency."""
     async with websockets.connect(url, open_timeout=10, max_size=None) as ws:
+        connected_ns = time.time_ns()
         while time.monotonic() < until:
             try:
                 raw = await asyncio.wait_for(ws.recv(), timeout=max(0.1, until - time.monotonic()))
@@ -54,14 +82,22 @@ async def _listen(url: str, latencies: list[float], stamp: str, until: float) ->
                 break
             now = time.time_ns()
             message = json.loads(raw)
-            sent = message.get(stamp) if stamp == "time_ns" else (message.get("event") or {}).get(stamp)
-            if sent:
+            event = message if stamp == "time_ns" else (message.get("event") or {})
+            sent = event.get(stamp)
+            if sent and sent >= connected_ns:
                 latencies.append((now - sent) / 1e6)
+                if kinds is not None:
+                    kinds[event.get("type", "?")] = kinds.get(event.get("type", "?"), 0) + 1
 
 
-def measure(duration_s: float = 30.0, people: int = 30, warmup_s: float = 5.0) -> dict[str, float]:
+def measure(duration_s: float = 30.0, people: int | None = None, warmup_s: float = 5.0, cameras: int = 4) -> dict:
+    """Run the live system on ``hall_site(cameras)`` with ``people`` walking (default 7.5 per
+    camera) and measure for ``duration_s`` after ``warmup_s``."""
+    people = people if people is not None else round(PEOPLE_PER_CAMERA * cameras)
+    site = hall_site(cameras)
     with tempfile.TemporaryDirectory(prefix="bevflow-bench-") as tmp:
-        site_path = four_camera_site(Path(tmp))
+        site_path = Path(tmp) / f"{site.site}.yaml"
+        site_path.write_text(dump_site(site))
         group = ServiceGroup(site=str(site_path), log_dir=Path(tmp) / "logs")
         with group:
             base = start_pipeline(group, free_port(), ingest_args=("--people", str(people)), gateway_args=("--no-view3d",))
@@ -74,40 +110,92 @@ def measure(duration_s: float = 30.0, people: int = 30, warmup_s: float = 5.0) -
                 with lock:
                     frames.append(truth.frame)
 
-            sub = bus.subscribe(session, bus.Keys("bench-4").truth, bus.JsonCodec(SimulatedTruth), on_truth)
+            sub = bus.subscribe(session, bus.Keys(site.site).truth, bus.JsonCodec(SimulatedTruth), on_truth)
             time.sleep(warmup_s)
             tracks_ms: list[float] = []
             alerts_ms: list[float] = []
+            alert_types: dict[str, int] = {}
             until = time.monotonic() + duration_s
             ws = base.replace("http://", "ws://")
 
             async def both() -> None:
                 await asyncio.gather(_listen(f"{ws}/ws/tracks", tracks_ms, "time_ns", until),
-                                     _listen(f"{ws}/ws/alerts", alerts_ms, "raised_ns", until))
+                                     _listen(f"{ws}/ws/alerts", alerts_ms, "raised_ns", until, alert_types))
 
             with lock:
                 first = len(frames)
+            cpu_before = {child.name: cpu_seconds(child.process.pid) for child in group.children}
             asyncio.run(both())
+            cpu_share = {child.name: round((cpu_seconds(child.process.pid) - cpu_before[child.name]) / duration_s, 3)
+                         for child in group.children}
             with lock:
                 seen = frames[first:]
             sub.close()
             session.close()
+            dead = [child.name for child in group.dead()]
     expected = (seen[-1] - seen[0] + 1) if seen else 0
     return {
-        "cameras": len(FOUR_CAMERAS),
-        "fps": 10,
+        "cameras": cameras,
+        "fps": FPS,
         "people": people,
         "duration_s": duration_s,
         "tracks_messages": len(tracks_ms),
         "tracks_latency_p50_ms": percentile(tracks_ms, 50),
         "tracks_latency_p99_ms": percentile(tracks_ms, 99),
         "alerts": len(alerts_ms),
+        "alert_types": alert_types,
         "live_latency_p50_ms": percentile(alerts_ms, 50),
         "live_latency_p99_ms": percentile(alerts_ms, 99),
         "frames_dropped_at_source": expected - len(set(seen)),
         "frames_published": len(set(seen)),
-        "alert_latency_mean_ms": statistics.fmean(alerts_ms) if alerts_ms else float("nan"),
+        "alert_latency_mean_ms": statistics.fmean(alerts_ms) if alerts_ms else math.nan,
+        "services_died": dead,
+        "cpu_cores_by_service": cpu_share,
     }
+
+
+def keeps_up(run: dict, bound_ms: float = LATENCY_BOUND_MS) -> tuple[bool, str]:
+    """Whether a ``measure`` result shows the machine keeping up, and if not, why."""
+    if run["services_died"]:
+        return False, f"services exited: {', '.join(run['services_died'])}"
+    if run["frames_published"] == 0:
+        return False, "no frame was published"
+    if run["frames_dropped_at_source"] > 0:
+        return False, f"{run['frames_dropped_at_source']} frames dropped at the source"
+    if not run["tracks_latency_p99_ms"] <= bound_ms:
+        return False, f"tracks latency p99 {run['tracks_latency_p99_ms']:.0f} ms > {bound_ms:.0f} ms"
+    if run["tracks_messages"] < 0.9 * FPS * run["duration_s"]:
+        return False, f"{run['tracks_messages']} ticks delivered in {run['duration_s']:.0f} s at {FPS} fps"
+    return True, "kept up"
+
+
+def max_cameras(steps: list[int], duration_s: float, warmup_s: float, first: dict | None = None,
+                bisect: bool = True) -> dict:
+    """Try the camera counts ``steps`` (ascending) until one fails, then (``bisect``) once halfway
+    between the last that kept up and the first that did not. ``first`` is a result of
+    ``measure`` already made for ``steps[0]``. Returns the largest count that kept up (None if
+    even the first failed), whether it is only a lower bound (nothing failed), and every probe."""
+    probes: list[dict] = []
+
+    def probe(n: int) -> bool:
+        run = first if (first is not None and n == first["cameras"]) else measure(duration_s, None, warmup_s, n)
+        ok, why = keeps_up(run)
+        probes.append({"cameras": n, "kept_up": ok, "why": why, "tracks_latency_p99_ms": run["tracks_latency_p99_ms"],
+                       "frames_dropped_at_source": run["frames_dropped_at_source"], "people": run["people"]})
+        return ok
+
+    best, failed = None, None
+    for n in steps:
+        if probe(n):
+            best = n
+        else:
+            failed = n
+            break
+    if bisect and best is not None and failed is not None and failed - best > 1:
+        middle = (best + failed) // 2
+        if probe(middle):
+            best = middle
+    return {"max_cameras": best, "lower_bound_only": failed is None, "probes": probes}
 
 
 if __name__ == "__main__":
@@ -115,10 +203,11 @@ if __name__ == "__main__":
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--duration", type=float, default=30.0)
-    parser.add_argument("--people", type=int, default=30)
+    parser.add_argument("--people", type=int, default=None, help="default: 7.5 per camera")
+    parser.add_argument("--cameras", type=int, default=4)
     parser.add_argument("--json", type=Path, default=None)
     args = parser.parse_args()
-    result = measure(args.duration, args.people)
+    result = measure(args.duration, args.people, cameras=args.cameras)
     for key, value in result.items():
         print(f"{key:28s} {value:.1f}" if isinstance(value, float) else f"{key:28s} {value}")
     if args.json:

@@ -30,6 +30,7 @@ SERVICES: dict[str, str] = {
     "projector": "turn 2D boxes into world cylinders with each camera's calibration",
     "tracker": "fuse cameras, track people, publish tracks, occupancy and alerts",
     "gateway": "serve the REST API, websockets, the dashboard and the 3D view",
+    "recorder": "write occupancy, alerts and trajectories to the history database",
 }
 PACKAGE = "bevflow_services"
 

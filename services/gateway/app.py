@@ -27,6 +27,8 @@ from bevflow.schemas import AlertMessage, Tracks
 from bevflow.site import Site
 
 from bevflow_services.gateway.routes import alerts, cameras, health, intervals, occupancy, streams, tracks
+from bevflow_services.gateway.routes import history as history_routes
+from bevflow_services.gateway.routes import reports
 from bevflow_services.gateway.routes import site as site_routes
 from bevflow_services.gateway.state import GatewayState
 
@@ -124,7 +126,7 @@ def create_app(
     app.state.view3d_port = None
     app.state.history_s = getattr(state.history, "retention_ns", 3600 * 10**9) / 1e9
 
-    for module in (occupancy, intervals, tracks, alerts, cameras, health, site_routes, streams):
+    for module in (occupancy, intervals, tracks, alerts, cameras, health, site_routes, streams, history_routes, reports):
         app.include_router(module.router)
     app.add_exception_handler(RequestValidationError, _validation_error)
     _serve_dashboard(app, dashboard)

@@ -37,7 +37,7 @@ from bevflow_services.bus import (
 )
 from bevflow_services.cli.serve import service_site
 from bevflow_services.gateway.app import create_app
-from bevflow_services.gateway.history import InMemoryHistory
+from bevflow_services.gateway.history_db import history_store
 from bevflow_services.gateway.state import GatewayState
 
 log = logging.getLogger(__name__)
@@ -99,6 +99,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--no-view3d", action="store_true", help="do not start the 3D view")
     group.add_argument("--history-s", type=float, default=3600.0,
                        help="seconds of occupancy, alert and trajectory history kept in memory (default 3600)")
+    group.add_argument("--db", default=None, metavar="URL",
+                       help="read the history from this database instead (a SQLite file path or a postgresql:// URL), "
+                       "which `bevflow serve recorder --db URL` writes; --history-s is then unused")
 
 
 def main(args: argparse.Namespace) -> int:
@@ -107,7 +110,7 @@ def main(args: argparse.Namespace) -> int:
     view3d_port = None if args.no_view3d else (args.view3d_port or args.port + 1)
     session = open_session(config_from_args(args))
     stats = BusStats()
-    state = GatewayState(site, InMemoryHistory(retention_s=args.history_s), site_id=site_id)
+    state = GatewayState(site, history_store(args.db, args.history_s), site_id=site_id)
     app = create_app(site, state, view3d_port=view3d_port, view3d_host=args.host, feed=bus_feed(session, state, stats))
     app.state.bus_stats = stats
     try:

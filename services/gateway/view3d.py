@@ -1,10 +1,15 @@
 """The live 3D view: a viser server showing the floor, the cameras, the zones and the people.
 
+Drawn for a security operator glancing at a wall screen: a dark floor with a faint metre grid,
+zones as translucent coloured areas with their names, cameras as yellow frustums with their ids,
+people as cyan cylinders with their track ids above their heads. Everyone in a distance violation
+turns red and stands on a red disc half the distance limit wide, and a red line, a few pixels
+thick at any zoom, joins each pair in violation.
+
 People are one batched mesh of unit cylinders, scaled per person to their fitted radius and
-height (one message for the whole crowd instead of one per person); each has an id label; pairs
-closer than the social-distance limit get a red line between them. A background thread refreshes
-the scene from ``GatewayState`` a few times a second, inside ``server.atomic()`` so a browser
-never shows half an update.
+height (one message for the whole crowd instead of one per person). A background thread
+refreshes the scene from ``GatewayState`` a few times a second, inside ``server.atomic()`` so a
+browser never shows half an update.
 """
 
 from __future__ import annotations
@@ -24,10 +29,25 @@ from bevflow_services.gateway.state import GatewayState
 
 log = logging.getLogger(__name__)
 
-PERSON_COLOR = (60, 140, 230)
-VIOLATION_COLOR = (230, 40, 40)
-ZONE_COLOR = (40, 170, 90)
+FLOOR_COLOR = (30, 35, 44)
+GRID_CELL_COLOR = (52, 60, 72)
+GRID_SECTION_COLOR = (84, 95, 112)
+PERSON_COLOR = (40, 190, 255)
+VIOLATION_COLOR = (255, 40, 40)
+CAMERA_COLOR = (255, 210, 40)
+COVERAGE_COLOR = (110, 100, 60)
+# Zone fills: none close to the people's cyan or to the violations' red and pink discs.
+ZONE_COLORS = ((255, 170, 30), (60, 200, 110), (190, 120, 255), (150, 210, 40), (230, 230, 230), (200, 150, 90))
+ZONE_OPACITY = 0.22
 LABEL_LIFT_M = 0.25
+VIOLATION_LINE_Z_M = 1.0  # waist height: between the bodies, below the id labels
+VIOLATION_LINE_PX = 7.0  # screen pixels: as visible across the hall as next to the camera
+FRUSTUM_SCALE_M = 0.6
+INITIAL_FOV_DEG = 45.0
+DISC_OPACITY = 0.55
+LEGEND = """**People**: cyan cylinders with their track id; **red** with a red disc while closer than the
+distance limit to someone (a red line joins the pair). **Zones**: coloured areas with their names.
+**Cameras**: yellow frustums; the thin circles are the areas they monitor."""
 
 
 def unit_cylinder(segments: int = 16) -> tuple[np.ndarray, np.ndarray]:
@@ -43,6 +63,43 @@ def unit_cylinder(segments: int = 16) -> tuple[np.ndarray, np.ndarray]:
     side = np.concatenate([np.stack([i, j, j + segments], 1), np.stack([i, j + segments, i + segments], 1)])
     caps = np.concatenate([np.stack([np.full(segments, b0), j, i], 1), np.stack([np.full(segments, t0), i + segments, j + segments], 1)])
     return vertices.astype(np.float32), np.concatenate([side, caps]).astype(np.uint32)
+
+
+def triangulate(polygon: np.ndarray) -> np.ndarray:
+    """(M, 3) vertex indices of triangles covering a simple polygon (convex or not), by ear
+    clipping, each wound counter-clockwise seen from above. Zones are a few vertices, so the
+    O(V³) worst case does not matter."""
+    points = np.asarray(polygon, dtype=np.float64)
+    if len(points) < 3:
+        return np.zeros((0, 3), dtype=np.uint32)
+    x, y = points[:, 0], points[:, 1]
+    area2 = float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
+    left = list(range(len(points))) if area2 >= 0 else list(range(len(points)))[::-1]
+    triangles = []
+    while len(left) > 3:
+        for k in range(len(left)):
+            a, b, c = left[k - 1], left[k], left[(k + 1) % len(left)]
+            if _cross(points[a], points[b], points[c]) <= 1e-12:
+                continue  # a reflex or flat corner is no ear
+            others = [p for p in left if p not in (a, b, c)]
+            if not any(_inside_triangle(points[p], points[a], points[b], points[c]) for p in others):
+                triangles.append((a, b, c))
+                left.pop(k)
+                break
+        else:  # a self-intersecting outline has no ear left: fan the rest rather than loop forever
+            triangles += [(left[0], left[k], left[k + 1]) for k in range(1, len(left) - 1)]
+            left = []
+    if len(left) == 3:
+        triangles.append(tuple(left))
+    return np.array(triangles, dtype=np.uint32).reshape(-1, 3)
+
+
+def _cross(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> float:
+    return float((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]))
+
+
+def _inside_triangle(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> bool:
+    return _cross(a, b, p) >= 0 and _cross(b, c, p) >= 0 and _cross(c, a, p) >= 0
 
 
 def floor_extent(site: Site) -> tuple[float, float, float, float]:
@@ -73,6 +130,21 @@ def polyline_segments(points: np.ndarray, z: float, closed: bool = True) -> np.n
     return np.stack([starts, ends], axis=1)
 
 
+def on_floor(segments: np.ndarray, floor: tuple[float, float, float, float]) -> np.ndarray:
+    """The (N, 2, 3) segments whose two ends lie on the floor rectangle (edges included)."""
+    x0, y0, x1, y1 = floor
+    xy = segments[..., :2]
+    inside = ((xy[..., 0] >= x0) & (xy[..., 0] <= x1) & (xy[..., 1] >= y0) & (xy[..., 1] <= y1)).all(axis=1)
+    return segments[inside]
+
+
+def person_colors(tracks: Tracks) -> np.ndarray:
+    """(N, 3) uint8 colours of ``tracks.tracks``: red for those in a violation, cyan otherwise."""
+    violating = {i for pair in tracks.violations for i in pair}
+    rows = [VIOLATION_COLOR if t.id in violating else PERSON_COLOR for t in tracks.tracks]
+    return np.array(rows, dtype=np.uint8).reshape(-1, 3)
+
+
 class View3D:
     """A viser server showing one site, refreshed from ``state`` at ``rate_hz``.
 
@@ -94,6 +166,7 @@ class View3D:
         self._people: viser.BatchedMeshHandle | None = None
         self._labels: dict[int, viser.LabelHandle] = {}
         self._lines: viser.LineSegmentsHandle | None = None
+        self._discs: viser.BatchedMeshHandle | None = None
         self._mesh = unit_cylinder()
 
     @property
@@ -102,7 +175,9 @@ class View3D:
 
     def start(self) -> None:
         self.server = viser.ViserServer(host=self.host, port=self.requested_port, verbose=False)
+        self.server.gui.configure_theme(dark_mode=True, show_share_button=False, brand_color=PERSON_COLOR)
         self.server.scene.set_up_direction("+z")
+        self.server.gui.add_markdown(LEGEND)
         self._draw_site()
         self._thread = threading.Thread(target=self._run, name="view3d", daemon=True)
         self._thread.start()
@@ -126,31 +201,58 @@ class View3D:
     # --- static scene --------------------------------------------------------------------------
     def _draw_site(self) -> None:
         assert self.server is not None
-        scene = self.server.scene
         x0, y0, x1, y1 = floor_extent(self.site)
         # Start looking at the whole floor from above its south edge, not at the origin up close.
         cx, cy, span = (x0 + x1) / 2, (y0 + y1) / 2, max(x1 - x0, y1 - y0)
+        # A narrower lens than viser's 75 degrees, from farther away: people stay upright on screen
+        # instead of leaning outwards towards the edges.
+        self.server.initial_camera.fov = math.radians(INITIAL_FOV_DEG)
         self.server.initial_camera.look_at = (cx, cy, 0.0)
-        self.server.initial_camera.position = (cx, cy - 0.8 * span, 0.7 * span)
-        scene.add_grid("/floor", width=x1 - x0, height=y1 - y0, plane="xy", position=((x0 + x1) / 2, (y0 + y1) / 2, 0.0),
-                       cell_size=1.0, section_size=5.0)
+        self.server.initial_camera.position = (cx, cy - 0.6 * span, 0.9 * span)
+        # An opaque dark plane under a faint 1 m / 5 m grid: bright people and zones stand out on it.
+        self.server.scene.add_grid(
+            "/floor", width=x1 - x0, height=y1 - y0, plane="xy", position=(cx, cy, 0.0),
+            cell_size=1.0, cell_color=GRID_CELL_COLOR, section_size=5.0, section_color=GRID_SECTION_COLOR,
+            plane_color=FLOOR_COLOR, plane_opacity=1.0, shadow_opacity=0.35, fade_distance=10.0 * span,
+        )
+        self._draw_zones()
+        self._draw_cameras()
+
+    def _draw_zones(self) -> None:
+        assert self.server is not None
+        scene = self.server.scene
+        for k, zone in enumerate(self.site.zones):
+            color = ZONE_COLORS[k % len(ZONE_COLORS)]
+            polygon = np.asarray(zone.polygon, dtype=np.float64)
+            # Stacked a millimetre apart so overlapping zones do not flicker against each other.
+            z = 0.01 + 0.001 * k
+            vertices = np.column_stack([polygon, np.full(len(polygon), z)]).astype(np.float32)
+            scene.add_mesh_simple(f"/zones/{zone.id}/area", vertices, triangulate(polygon), color=color,
+                                  opacity=ZONE_OPACITY, side="double", cast_shadow=False, receive_shadow=False)
+            scene.add_line_segments(f"/zones/{zone.id}/outline", polyline_segments(polygon, z + 0.005), colors=color,
+                                    thickness=0.08)
+            cx, cy = polygon.mean(axis=0)
+            scene.add_label(f"/zones/{zone.id}/label", zone.name or zone.id, position=(float(cx), float(cy), 0.05),
+                            font_screen_scale=1.4, anchor="center-center")
+
+    def _draw_cameras(self) -> None:
+        assert self.server is not None
+        scene = self.server.scene
+        floor = floor_extent(self.site)
         for config in self.site.cameras:
             camera = self.site.camera(config.id)
             w, h = camera.image_size
             scene.add_camera_frustum(f"/cameras/{config.id}", fov=vertical_fov(self.site, config.id), aspect=w / h,
-                                     scale=0.4, color=(30, 30, 30), wxyz=vtf.SO3.from_matrix(camera.R.T).wxyz,
-                                     position=camera.center)
-            scene.add_label(f"/cameras/{config.id}/label", config.id, position=(0.0, 0.0, 0.0))
+                                     scale=FRUSTUM_SCALE_M, thickness=0.05, color=CAMERA_COLOR,
+                                     wxyz=vtf.SO3.from_matrix(camera.R.T).wxyz, position=camera.center,
+                                     cast_shadow=False)
+            scene.add_label(f"/cameras/{config.id}/label", config.id, position=(0.0, 0.0, 0.0), anchor="bottom-center")
             if config.monitored_radius_m:
-                a = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+                a = np.linspace(0, 2 * np.pi, 96, endpoint=False)
                 circle = camera.center[:2] + config.monitored_radius_m * np.column_stack([np.cos(a), np.sin(a)])
-                scene.add_line_segments(f"/coverage/{config.id}", polyline_segments(circle, 0.005), colors=(150, 150, 150),
-                                        thickness=0.02)
-        for zone in self.site.zones:
-            polygon = np.asarray(zone.polygon, dtype=np.float64)
-            scene.add_line_segments(f"/zones/{zone.id}", polyline_segments(polygon, 0.01), colors=ZONE_COLOR, thickness=0.05)
-            cx, cy = polygon.mean(axis=0)
-            scene.add_label(f"/zones/{zone.id}/label", zone.name or zone.id, position=(float(cx), float(cy), 0.05))
+                arcs = on_floor(polyline_segments(circle, 0.005), floor)
+                if len(arcs):
+                    scene.add_line_segments(f"/coverage/{config.id}", arcs, colors=COVERAGE_COLOR, thickness=0.04)
 
     # --- people --------------------------------------------------------------------------------
     def refresh(self) -> None:
@@ -165,29 +267,34 @@ class View3D:
             self._shown_time_ns = tracks.time_ns
 
     def _show_people(self, tracks: Tracks) -> None:
-        assert self.server is not None
         people = tracks.tracks
-        if not people:
-            if self._people is not None:
-                self._people.remove()
-                self._people = None
-        else:
-            positions = np.array([[t.xy[0], t.xy[1], 0.0] for t in people], dtype=np.float32)
-            scales = np.array([[t.radius, t.radius, t.height] for t in people], dtype=np.float32)
-            violating = {i for pair in tracks.violations for i in pair}
-            colors = np.array([VIOLATION_COLOR if t.id in violating else PERSON_COLOR for t in people], dtype=np.uint8)
-            if self._people is not None and len(self._people.batched_positions) == len(people):
-                self._people.batched_positions = positions
-                self._people.batched_scales = scales
-                self._people.batched_colors = colors
-            else:
-                # The instance count changed: replace the node (same name) so every array matches.
-                wxyzs = np.tile(np.array([1.0, 0.0, 0.0, 0.0], dtype=np.float32), (len(people), 1))
-                self._people = self.server.scene.add_batched_meshes_simple(
-                    "/people", *self._mesh, batched_wxyzs=wxyzs, batched_positions=positions,
-                    batched_scales=scales, batched_colors=colors, lod="off",
-                )
+        positions = np.array([[t.xy[0], t.xy[1], 0.0] for t in people], dtype=np.float32).reshape(-1, 3)
+        scales = np.array([[t.radius, t.radius, t.height] for t in people], dtype=np.float32).reshape(-1, 3)
+        self._people = self._batched(self._people, "/people", positions, scales, person_colors(tracks))
         self._show_labels(tracks)
+
+    def _batched(
+        self, handle: viser.BatchedMeshHandle | None, name: str, positions: np.ndarray, scales: np.ndarray,
+        colors: np.ndarray, opacity: float | None = None,
+    ) -> viser.BatchedMeshHandle | None:
+        """Cylinders at ``positions``: ``handle`` updated in place, or replaced when the count
+        changed (so every per-instance array matches), or removed when there are none."""
+        assert self.server is not None
+        if len(positions) == 0:
+            if handle is not None:
+                handle.remove()
+            return None
+        if handle is not None and len(handle.batched_positions) == len(positions):
+            handle.batched_positions = positions
+            handle.batched_scales = scales
+            handle.batched_colors = colors
+            return handle
+        wxyzs = np.tile(np.array([1.0, 0.0, 0.0, 0.0], dtype=np.float32), (len(positions), 1))
+        return self.server.scene.add_batched_meshes_simple(
+            name, *self._mesh, batched_wxyzs=wxyzs, batched_positions=positions, batched_scales=scales,
+            batched_colors=colors, lod="off", opacity=opacity, cast_shadow=opacity is None,
+            receive_shadow=opacity is None,
+        )
 
     def _show_labels(self, tracks: Tracks) -> None:
         assert self.server is not None
@@ -198,22 +305,33 @@ class View3D:
             label = self._labels.get(t.id)
             if label is None:
                 self._labels[t.id] = self.server.scene.add_label(f"/labels/{t.id}", str(t.id), position=position,
-                                                                  anchor="bottom-center")
+                                                                  anchor="bottom-center", font_screen_scale=1.2)
             else:
                 label.position = position
         for gone in set(self._labels) - seen:
             self._labels.pop(gone).remove()
 
     def _show_violations(self, tracks: Tracks) -> None:
+        """A red disc on the floor, half the distance limit wide, under everyone in a violation
+        (the discs of a pair overlap), and a red line above the heads of each pair."""
         assert self.server is not None
-        where = {t.id: (t.xy[0], t.xy[1], 1.0) for t in tracks.tracks}
-        pairs = [(where[a], where[b]) for a, b in tracks.violations if a in where and b in where]
+        where = {t.id: (t.xy[0], t.xy[1]) for t in tracks.tracks}
+        pairs = np.array([(where[a], where[b]) for a, b in tracks.violations if a in where and b in where])
+        pairs = pairs.reshape(-1, 2, 2)
         if self._lines is not None:
             self._lines.remove()
             self._lines = None
-        if pairs:
-            self._lines = self.server.scene.add_line_segments("/violations", np.array(pairs, dtype=np.float32),
-                                                              colors=VIOLATION_COLOR, thickness=0.05)
+        if len(pairs):
+            lines = np.concatenate([pairs, np.full((len(pairs), 2, 1), VIOLATION_LINE_Z_M)], axis=2)
+            self._lines = self.server.scene.add_line_segments("/violations/lines", lines.astype(np.float32),
+                                                              colors=VIOLATION_COLOR, thickness=VIOLATION_LINE_PX,
+                                                              thickness_units="screen")
+        feet = np.unique(pairs.reshape(-1, 2), axis=0)
+        radius = self.site.thresholds.social_distance_m / 2.0
+        positions = np.column_stack([feet, np.full(len(feet), 0.02)]).astype(np.float32)
+        scales = np.tile(np.array([radius, radius, 0.01], dtype=np.float32), (len(feet), 1))
+        colors = np.tile(np.array(VIOLATION_COLOR, dtype=np.uint8), (len(feet), 1))
+        self._discs = self._batched(self._discs, "/violations/discs", positions, scales, colors, DISC_OPACITY)
 
     # --- for tests and status pages ------------------------------------------------------------
     @property
@@ -223,3 +341,11 @@ class View3D:
     @property
     def shown_labels(self) -> list[int]:
         return sorted(self._labels)
+
+    @property
+    def shown_violation_lines(self) -> int:
+        return 0 if self._lines is None else len(self._lines.points)
+
+    @property
+    def shown_violation_discs(self) -> int:
+        return 0 if self._discs is None else len(self._discs.batched_positions)

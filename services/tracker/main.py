@@ -12,6 +12,7 @@ ready ticks in time order and steps the ``SiteTracker`` with each. A camera sile
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import logging
 import threading
 import time
@@ -36,6 +37,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        help="how long a tick waits for a late camera before it goes without it (default 150)")
     group.add_argument("--camera-timeout", type=float, default=5.0,
                        help="seconds of silence after which a camera is reported down (default 5)")
+    group.add_argument("--event-cache", type=int, default=10000,
+                       help="recent alerts kept for a history recorder that restarts (default 10000)")
     group.add_argument("--first-id", type=int, default=1,
                        help="first track id (give the last run's next id to never reuse an id)")
 
@@ -86,11 +89,12 @@ def main(args: argparse.Namespace) -> int:
         if result != "accepted":
             log.debug("cylinders from %s at %d: %s", message.camera, message.capture_ns, result)
 
-    session = bus.open_session(bus.config_from_args(args))
+    # Timestamps let the events' cache serve a restarted recorder what it missed.
+    session = bus.open_session(dataclasses.replace(bus.config_from_args(args), timestamping=True))
     stats = bus.BusStats()
     tracks_out = bus.Publication(session, keys.tracks, bus.JsonCodec(Tracks))
     occupancy_out = bus.Publication(session, keys.occupancy, bus.JsonCodec(Occupancy))
-    events_out = bus.Publication(session, keys.events, bus.JsonCodec(Event, "Event"), block_when_congested=True)
+    events_out = bus.CachedPublication(session, keys.events, bus.JsonCodec(Event, "Event"), cache=args.event_cache)
     inbox = bus.subscribe(session, keys.cylinders("*"), bus.JsonCodec(CameraCylinders), on_cylinders, stats=stats)
     token = bus.announce(session, keys, SERVICE)
     print(f"bevflow tracker: site {site_id!r}, {len(site.camera_ids)} cameras, tick {args.tick_ms:g} ms", flush=True)

@@ -141,6 +141,14 @@ class Thresholds(_Strict):
     group_after_s: Annotated[float, Field(gt=0)] | None = Field(
         default=60.0, description="pairs closer than the limit for this long are treated as a group; null disables"
     )
+    group_walk_s: Annotated[float, Field(gt=0)] | None = Field(
+        default=8.0,
+        description=(
+            "pairs closer than the limit that walk together (same direction and pace) for this long are "
+            "treated as a group, and no alert is raised while they keep walking together; people standing "
+            "close, as in a queue, are not grouped by this rule; null disables"
+        ),
+    )
     site_capacity: Annotated[int, Field(ge=0)] | None = None
     capacity_hysteresis: Annotated[int, Field(ge=0)] = 2
     track_activate_hits: Annotated[int, Field(ge=1)] = 3

@@ -83,13 +83,16 @@ class SiteAnalytics:
             else None
         )
 
-    def update(self, time_ns: int, ids: ArrayLike, xy: ArrayLike) -> AnalyticsTick:
-        """Advance every analytic to ``time_ns`` with the site's active tracks and feet positions.
+    def update(self, time_ns: int, ids: ArrayLike, xy: ArrayLike, velocity: ArrayLike | None = None) -> AnalyticsTick:
+        """Advance every analytic to ``time_ns`` with the site's active tracks, their feet positions
+        and, when known, their (N, 2) velocities in m/s (they let the distance monitor tell a
+        group walking together from strangers standing close).
 
         A tick with no tracks ends every open alert (what a service does at shutdown)."""
         ids_arr, xy_arr = check_positions(ids, xy)
         inside = self.zones.contains(xy_arr)
-        events: list[DistanceViolation | OverCapacity] = list(self.distance.update(time_ns, ids_arr, xy_arr))
+        distance_events = self.distance.update(time_ns, ids_arr, xy_arr, velocity)
+        events: list[DistanceViolation | OverCapacity] = list(distance_events)
         occupancy, capacity_events = self.occupancy.update(time_ns, ids_arr, xy_arr, inside=inside)
         events += capacity_events
         zone_counts = [z.count for z in occupancy.zones]

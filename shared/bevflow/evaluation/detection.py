@@ -14,8 +14,12 @@ off by default so the boxes are the dataset's own.
 
 Estimates outside the annotated area are dropped before scoring (after fusion, so the area does
 not change what merges): nobody outside it is annotated, so they are neither right nor wrong.
-Each camera is also scored alone (its own cylinders in the area against the people it sees), which
-separates a camera's calibration or projection error from what fusion does.
+Each camera is also scored alone (its own cylinders in the area against the people it sees, weak
+fits left out as fusion leaves them out when alone), which separates a camera's calibration or
+projection error from what fusion does.
+
+Fusion is ``bevflow.fusion``'s default, uncertainty-aware one; ``position_noise=None`` runs the
+paper's plain distance rule instead, and ``grid`` sets the cylinder fit, for ablations.
 
 The random noise of frame f, camera i is drawn from ``view_rng(seed, f, i)``: a run over a slice
 of the frames sees exactly the noise those frames get in a full run, and every method sees the
@@ -32,9 +36,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bevflow.camera import Camera
-from bevflow.cylinder import fit_cylinders
+from bevflow.cylinder import CylinderGrid, fit_cylinders
 from bevflow.detections import Boxes, Cylinders
-from bevflow.fusion import fuse_cylinders
+from bevflow.fusion import PositionNoise, fuse_cylinders
 from bevflow.metrics.detection import DetectionScores, score_detections
 from bevflow.sim.noise import DetectorNoise, NoisyBoxes, apply_detector_noise, view_rng
 
@@ -82,6 +86,7 @@ class CameraCounts:
     false_positives: int
     clipped: int  # boxes cut by the image border (only with clip_to_image)
     unplaced: int  # detections the projection could not put on the floor
+    weak: int  # placed, but weak (a cut box on a camera that cannot rebuild it): never a person alone
     outside_area: int  # placed, but outside the annotated area
     alone: DetectionScores  # this camera's cylinders in the area against the people it sees
 
@@ -100,6 +105,7 @@ class DetectionEvaluation:
     seed: int
     threshold_m: float
     fusion_distance_m: float
+    position_noise: PositionNoise | None  # None: the paper's plain distance rule
     clip_to_image: bool
     frame_numbers: tuple[int, ...]
     scores: DetectionScores
@@ -130,6 +136,7 @@ class DetectionEvaluation:
             "seed": self.seed,
             "threshold_m": self.threshold_m,
             "fusion_distance_m": self.fusion_distance_m,
+            "fusion": "paper" if self.position_noise is None else {"position_noise": asdict(self.position_noise)},
             "clip_to_image": self.clip_to_image,
             "per_camera": [c.as_dict() for c in self.per_camera],
         }
@@ -171,6 +178,8 @@ def evaluate_detection(
     threshold_m: float = 0.5,
     fusion_distance_m: float = 0.45,
     clip_to_image: bool = False,
+    position_noise: PositionNoise | None = PositionNoise(),
+    grid: CylinderGrid = CylinderGrid(),
 ) -> DetectionEvaluation:
     """Run noise -> projection -> fusion on ``dataset.frames[frames]`` and score the fused feet."""
     selected = list(dataset.frames[frames])
@@ -181,15 +190,16 @@ def evaluate_detection(
     views_merged: list[FloatArray] = []
     alone_gt: list[list[FloatArray]] = [[] for _ in cameras]
     alone_est: list[list[FloatArray]] = [[] for _ in cameras]
-    counts = np.zeros((n_cam, 8), dtype=np.int64)  # the CameraCounts fields from boxes to outside_area
+    counts = np.zeros((n_cam, 9), dtype=np.int64)  # the CameraCounts fields from boxes to outside_area
     for frame in selected:
         per_camera = []
         for i, (camera, view, noisy) in enumerate(zip(cameras, frame.views, noisy_detections(dataset, frame, noise, seed))):
             clipped = 0
             if clip_to_image:
                 noisy, clipped = clip_boxes_to_image(noisy, camera.image_size)
-            cylinders = fit_cylinders(camera, noisy.boxes, method=method).with_camera(i)
+            cylinders = fit_cylinders(camera, noisy.boxes, method=method, grid=grid).with_camera(i)
             placed = np.isfinite(cylinders.xy).all(axis=1)
+            weak = placed & (cylinders.score <= 0)
             inside = dataset.area.contains(cylinders.xy)
             counts[i] += [
                 len(view.boxes),
@@ -199,13 +209,14 @@ def evaluate_detection(
                 int((noisy.source < 0).sum()),
                 clipped,
                 int((~placed).sum()),
+                int(weak.sum()),
                 int((placed & ~inside).sum()),
             ]
             seen = np.isin(frame.person_ids, view.person_ids)
             alone_gt[i].append(frame.feet_xy[seen])
-            alone_est[i].append(cylinders.xy[inside])
+            alone_est[i].append(cylinders.xy[inside & ~weak])
             per_camera.append(cylinders[placed])
-        fusion = fuse_cylinders(Cylinders.merge(per_camera), cameras, distance_m=fusion_distance_m)
+        fusion = fuse_cylinders(Cylinders.merge(per_camera), cameras, distance_m=fusion_distance_m, noise=position_noise)
         inside = dataset.area.contains(fusion.fused.xy)
         gt.append(frame.feet_xy)
         fused_xy.append(fusion.fused.xy[inside])
@@ -217,6 +228,7 @@ def evaluate_detection(
         seed=seed,
         threshold_m=threshold_m,
         fusion_distance_m=fusion_distance_m,
+        position_noise=position_noise,
         clip_to_image=clip_to_image,
         frame_numbers=tuple(int(f.frame) for f in selected),
         scores=score_detections(gt, fused_xy, threshold_m=threshold_m),

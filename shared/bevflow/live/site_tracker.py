@@ -51,7 +51,7 @@ class SiteTracker:
         seen = Cylinders.merge(parts)
         fusion = fuse_cylinders(seen, self.cameras, self.site.thresholds.fusion_distance_m)
         table = self.tracker.update(fusion.fused, time_ns / 1e9)
-        tick = self.analytics.update(time_ns, table.id, table.xy)
+        tick = self.analytics.update(time_ns, table.id, table.xy, table.velocity)
         tracks = Tracks(
             site=self.site.site,
             time_ns=time_ns,
@@ -80,6 +80,8 @@ class SiteTracker:
         """For each fused person, the ids of the cameras whose cylinders were merged into it."""
         out: list[list[str]] = [[] for _ in range(len(fusion.fused))]
         for row, cam in zip(fusion.assignment, input_cameras, strict=True):
+            if row < 0:  # not placed on the floor, or a weak view that joined nobody
+                continue
             name = self.camera_ids[cam]
             if name not in out[row]:
                 out[row].append(name)

@@ -20,13 +20,20 @@ def frames(duration_s: float, people: Callable[[float], dict[int, tuple[float, f
     return [(k * TICK, people(k * TICK)) for k in range(round(duration_s / TICK) + 1)]
 
 
-def run(monitor: DistanceMonitor, ticks: list[Frame]) -> list[tuple[float, DistanceViolation]]:
-    """(tick time in seconds, event) for every event published."""
+def run(
+    monitor: DistanceMonitor, ticks: list[Frame], velocities: bool = False
+) -> list[tuple[float, DistanceViolation]]:
+    """(tick time in seconds, event) for every event published. With ``velocities``, each track's
+    velocity is its displacement since the previous tick, zero on its first (as a tracker knows it)."""
     published = []
+    previous: dict[int, tuple[float, float]] = {}
     for t, people in ticks:
         ids = list(people)
         xy = np.array([people[i] for i in ids], dtype=float).reshape(-1, 2)
-        published += [(round(t, 6), e) for e in monitor.update(round(t * S), ids, xy)]
+        before = np.array([previous.get(i, people[i]) for i in ids], dtype=float).reshape(-1, 2)
+        velocity = (xy - before) / TICK if velocities else None
+        published += [(round(t, 6), e) for e in monitor.update(round(t * S), ids, xy, velocity)]
+        previous = people
     return published
 
 
@@ -161,6 +168,165 @@ def test_scenarios(scene: Callable, duration_s: float, thresholds: Thresholds, m
     assert summary(published) == expected
 
 
+# --- walking together: velocities tell a group on the move from strangers standing close -----------
+WALK = 1.2  # m/s
+
+
+def couple_walking(t: float) -> dict[int, tuple[float, float]]:
+    # Side by side, 1 m apart, from the first tick on.
+    return {1: (-10 + WALK * t, 0.0), 2: (-10 + WALK * t, 1.0)}
+
+
+def meet_and_stop(t: float) -> dict[int, tuple[float, float]]:
+    # Strangers walk toward each other and stop 1 m apart at 5.5 / 1.2 = 4.58 s; they are closer
+    # than 2 m from 5 / 1.2 = 4.17 s on, so from the 4.2 s tick.
+    walked = WALK * min(t, 5.5 / WALK)
+    return {1: (-6 + walked, 0.0), 2: (6 - walked, 0.0)}
+
+
+def queue(t: float) -> dict[int, tuple[float, float]]:
+    # Three strangers standing in line 1.5 m apart.
+    return {1: (0.0, 0.0), 2: (1.5, 0.0), 3: (3.0, 0.0)}
+
+
+def one_stops_after(walk_s: float) -> Callable[[float], dict[int, tuple[float, float]]]:
+    # A couple walks side by side; at walk_s track 1 stops, track 2 drifts on at 0.3 m/s for 2 s
+    # (too slow to be walking) and stands 0.6 m ahead of it: still close (1.17 m).
+    def scene(t: float) -> dict[int, tuple[float, float]]:
+        x = -10 + WALK * min(t, walk_s)
+        return {1: (x, 0.0), 2: (x + 0.3 * min(max(t - walk_s, 0.0), 2.0), 1.0)}
+
+    return scene
+
+
+def overtake(extra_mps: float) -> Callable[[float], dict[int, tuple[float, float]]]:
+    # Track 2 starts 3 m behind track 1 and 1 m to its side, and walks extra_mps faster.
+    return lambda t: {1: (-10 + WALK * t, 0.0), 2: (-13 + (WALK + extra_mps) * t, 1.0)}
+
+
+def stand_then_walk_off(t: float) -> dict[int, tuple[float, float]]:
+    # Standing 1 m apart for 3 s, then walking off together side by side.
+    x = WALK * max(t - 3.0, 0.0)
+    return {1: (x, 0.0), 2: (x, 1.0)}
+
+
+@pytest.mark.parametrize(
+    ("scene", "duration_s", "thresholds", "expected", "groups"),
+    [
+        pytest.param(couple_walking, 20, Thresholds(), [], [[1, 2]], id="a couple walking side by side never alerts"),
+        pytest.param(
+            couple_walking,
+            20,
+            Thresholds(group_walk_s=None),
+            [(2.0, [1, 2], 0.0, None, 1.0, False)],
+            [],
+            id="without the walking rule the couple alerts",
+        ),
+        pytest.param(
+            meet_and_stop,
+            10,
+            Thresholds(),
+            [(6.2, [1, 2], 4.2, None, 1.0, False)],
+            [],
+            id="strangers meeting and stopping 1 m apart alert 2 s later",
+        ),
+        pytest.param(
+            queue,
+            5,
+            Thresholds(),
+            [(2.0, [1, 2], 0.0, None, 1.5, False), (2.0, [2, 3], 0.0, None, 1.5, False)],
+            [],
+            id="a queue standing 1.5 m apart alerts",
+        ),
+        pytest.param(
+            one_stops_after(4.0),
+            10,
+            Thresholds(),
+            # Last walked together at 4.0 s; the stretch is over once the 1 s grace has passed.
+            [(5.1, [1, 2], 0.0, None, 1.0, False)],
+            [],
+            id="together 4 s then one stops nearby: alert once the walk is over",
+        ),
+        pytest.param(
+            one_stops_after(10.0),
+            20,
+            Thresholds(),
+            [],
+            [[1, 2]],
+            id="together 10 s then one stops nearby: already a group",
+        ),
+        pytest.param(brush_past, 10, Thresholds(), [], [], id="crossing pedestrians brushing past"),
+        pytest.param(
+            overtake(0.35),
+            20,
+            Thresholds(),
+            # Close from 3.7 s; the offset has wandered 0.35 * 4.3 = 1.5 m > walk_drift_m at 8.0 s; closest
+            # 1 m (side by side at 8.6 s, 0.01 m ahead); farther than 2.2 m from 14.2 s.
+            [(8.0, [1, 2], 3.7, None, round(math.hypot(0.2, 1.0), 9), False),
+             (14.2, [1, 2], 3.7, 14.2, round(math.hypot(0.01, 1.0), 9), False)],
+            [],
+            id="a slow overtaker is alerted once the offset has drifted",
+        ),
+        pytest.param(
+            overtake(1.0),
+            8,
+            Thresholds(),
+            [(3.3, [1, 2], 1.3, None, 1.0, False), (5.0, [1, 2], 1.3, 5.0, 1.0, False)],
+            [],
+            id="a fast overtaker is alerted after 2 s",
+        ),
+        pytest.param(
+            stand_then_walk_off,
+            15,
+            Thresholds(),
+            # Walking together from the 3.1 s tick: a group 8 s later.
+            [(2.0, [1, 2], 0.0, None, 1.0, False), (11.1, [1, 2], 0.0, 11.1, 1.0, True)],
+            [[1, 2]],
+            id="standing close then walking off together: alerted, then withdrawn",
+        ),
+    ],
+)
+def test_walking_together(
+    scene: Callable, duration_s: float, thresholds: Thresholds, expected: list, groups: list
+) -> None:
+    monitor = DistanceMonitor(thresholds)
+    assert summary(run(monitor, frames(duration_s, scene), velocities=True)) == expected
+    assert monitor.groups.tolist() == groups
+
+
+def test_walking_pairs_are_held_and_listed() -> None:
+    monitor = DistanceMonitor(Thresholds())
+    ticks = frames(20, couple_walking)
+    run(monitor, ticks[:31], velocities=True)  # 3 s: walking together, no violation
+    assert monitor.walking_pairs.tolist() == [[1, 2]]
+    assert (monitor.current_pairs.tolist(), monitor.groups.tolist()) == ([], [])
+    run(monitor, ticks[31:], velocities=True)  # 20 s: a group, no longer listed as walking
+    assert (monitor.walking_pairs.tolist(), monitor.groups.tolist()) == ([], [[1, 2]])
+
+
+@pytest.mark.parametrize(
+    ("velocity", "message"),
+    [
+        ([[0, 0]], r"\(N, 2\) array of m/s for the 2 tracks"),
+        ([[0, 0, 0], [1, 1, 1]], r"got shape \(2, 3\)"),
+        ([[0, 0], [np.inf, 0]], "finite"),
+    ],
+)
+def test_bad_velocities_are_refused(velocity: list, message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        DistanceMonitor(Thresholds()).update(0, [1, 2], [[0, 0], [1, 1]], velocity)
+
+
+@pytest.mark.parametrize(
+    "option",
+    ["release_margin_m", "walk_speed_mps", "walk_tolerance_mps", "walk_grace_s", "velocity_smoothing_s",
+     "walk_drift_m"],
+)
+def test_negative_options_are_refused(option: str) -> None:
+    with pytest.raises(ValueError, match=f"{option} must be >= 0"):
+        DistanceMonitor(Thresholds(), **{option: -0.1})
+
+
 def test_start_and_end_share_an_id_and_record_the_closest_approach() -> None:
     zones = [
         Zone(id="west", polygon=[(-5, -5), (0.7, -5), (0.7, 5), (-5, 5)]),
@@ -270,11 +436,19 @@ def random_walk(seed: int, people: int = 9, ticks: int = 300) -> list[Frame]:
     return out
 
 
+@pytest.mark.parametrize("still", [False, True], ids=["no velocities", "standing still"])
 @pytest.mark.parametrize("seed", range(4))
-def test_matches_the_all_pairs_reference(seed: int) -> None:
+def test_matches_the_all_pairs_reference(seed: int, still: bool) -> None:
+    # Velocities of people standing still must change nothing: nobody walks together.
     th = Thresholds(violation_min_duration_s=0.5, group_after_s=3.0)
     ticks = random_walk(seed)
-    published = summary(run(DistanceMonitor(th, release_margin_m=0.2), ticks))
+    monitor = DistanceMonitor(th, release_margin_m=0.2)
+    published = []
+    for t, people in ticks:
+        ids, xy = list(people), np.array(list(people.values()), dtype=float).reshape(-1, 2)
+        events = monitor.update(round(t * S), ids, xy, np.zeros_like(xy) if still else None)
+        published += [(round(t, 6), e) for e in events]
+    published = summary(published)
     expected = [(t, k, f / S, None if e is None else e / S, m, g) for t, k, f, e, m, g in reference(ticks, th, 0.2)]
     assert len(expected) > 20  # the walk exercises starts, ends and groups
     assert {g for *_, g in expected} == {False, True}

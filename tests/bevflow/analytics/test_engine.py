@@ -90,6 +90,20 @@ def test_trajectories_and_contacts_through_the_facade() -> None:
         off.trajectory(1)
 
 
+@pytest.mark.parametrize(
+    ("with_velocity", "violations"),
+    [(False, [[1, 2]]), (True, [])],
+    ids=["positions alone: a violation", "velocities: a couple walking together"],
+)
+def test_velocities_reach_the_distance_monitor(with_velocity: bool, violations: list) -> None:
+    analytics = SiteAnalytics(SITE)
+    velocity = np.array([[1.2, 0.0], [1.2, 0.0]])
+    for k in range(31):  # 0 .. 3 s, side by side 1 m apart along the bar and past it
+        xy = np.array([[0.5 + 0.12 * k, 1.0], [0.5 + 0.12 * k, 2.0]])
+        tick = analytics.update(k * TICK, [1, 2], xy, velocity if with_velocity else None)
+    assert tick.violations.tolist() == violations
+
+
 def test_site_crowding_is_tracked_at_80_percent_of_capacity() -> None:
     analytics = SiteAnalytics(SITE, crowded_gap_s=0, crowded_min_duration_s=0)
     ids = np.arange(9)

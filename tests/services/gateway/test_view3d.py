@@ -5,6 +5,7 @@ import socket
 import urllib.request
 from collections.abc import Iterator
 
+import cv2
 import numpy as np
 import pytest
 from fastapi.testclient import TestClient
@@ -12,7 +13,17 @@ from fastapi.testclient import TestClient
 from bevflow.site import Site, parse_site
 
 from bevflow_services.gateway import GatewayState, create_app
-from bevflow_services.gateway.view3d import View3D, floor_extent, unit_cylinder, vertical_fov
+from bevflow_services.gateway.view3d import (
+    PERSON_COLOR,
+    VIOLATION_COLOR,
+    View3D,
+    floor_extent,
+    on_floor,
+    person_colors,
+    triangulate,
+    unit_cylinder,
+    vertical_fov,
+)
 from tests.services.gateway.feed import S, SITE_YAML, T0, tracks
 
 
@@ -52,6 +63,56 @@ def test_the_view_shows_the_latest_people_with_labels(view: View3D, state: Gatew
     state.apply(tracks(T0 + 2 * S, {}))
     view.refresh()
     assert (view.shown_people, view.shown_labels) == (0, [])
+
+
+def test_violations_get_red_people_lines_and_discs(view: View3D, state: GatewayState) -> None:
+    state.apply(tracks(T0, {1: (0.0, 0.0), 2: (1.0, 0.0), 3: (1.5, 1.0), 4: (9.0, 0.0)}, [(1, 2), (2, 3)]))
+    view.refresh()
+    assert (view.shown_violation_lines, view.shown_violation_discs) == (2, 3)  # two pairs, three people
+    state.apply(tracks(T0 + S, {1: (0.0, 0.0), 4: (9.0, 0.0)}))
+    view.refresh()
+    assert (view.shown_violation_lines, view.shown_violation_discs) == (0, 0)
+
+
+def test_person_colors_mark_everyone_in_a_violation() -> None:
+    message = tracks(T0, {1: (0.0, 0.0), 2: (1.0, 0.0), 3: (5.0, 5.0)}, [(1, 2)])
+    assert person_colors(message).tolist() == [list(VIOLATION_COLOR), list(VIOLATION_COLOR), list(PERSON_COLOR)]
+    assert person_colors(tracks(T0, {})).shape == (0, 3)
+
+
+def _area(points: np.ndarray) -> float:
+    x, y = points[:, 0], points[:, 1]
+    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
+
+
+@pytest.mark.parametrize(
+    "polygon",
+    [
+        pytest.param([(0, 0), (4, 0), (4, 3), (0, 3)], id="rectangle"),
+        pytest.param([(0, 3), (4, 3), (4, 0), (0, 0)], id="clockwise rectangle"),
+        pytest.param([(0, 0), (4, 0), (4, 1), (1, 1), (1, 4), (0, 4)], id="L shape"),
+        pytest.param([(0, 0), (6, 0), (6, 5), (3, 1), (0, 5)], id="deep notch"),
+    ],
+)
+def test_triangulate_covers_a_zone_exactly_once(polygon: list) -> None:
+    points = np.asarray(polygon, dtype=float)
+    faces = triangulate(points)
+    assert faces.shape == (len(points) - 2, 3)
+    areas = [_area(points[f]) for f in faces]
+    # Every triangle faces up, and together they cover the polygon's area: no overlap, no gap.
+    assert min(areas) > 0
+    assert sum(areas) == pytest.approx(abs(_area(points)))
+    # Each triangle's centroid lies inside the polygon (none bridges the notch of a concave zone).
+    contour = points.astype(np.float32).reshape(-1, 1, 2)
+    centroids = points[faces].mean(axis=1)
+    assert all(cv2.pointPolygonTest(contour, (float(x), float(y)), False) > 0 for x, y in centroids)
+
+
+def test_on_floor_keeps_the_segments_inside_the_floor() -> None:
+    inside, on_edge = [[0, 0, 0], [1, 1, 0]], [[10, 5, 0], [10, 0, 0]]
+    crossing, outside = [[9, 9, 0], [11, 9, 0]], [[-1, 0, 0], [-1, 5, 0]]
+    segments = np.array([inside, crossing, outside, on_edge], dtype=float)
+    assert on_floor(segments, (0.0, 0.0, 10.0, 10.0)).tolist() == [inside, on_edge]
 
 
 def test_the_app_starts_the_view_with_its_lifespan_and_reports_its_url(site: Site, state: GatewayState) -> None:

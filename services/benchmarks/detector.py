@@ -1,0 +1,108 @@
+"""Detector speed per frame at the scaled input of 3.3, 5.5 and 8.1 m cameras, on 1 and 2 threads.
+
+``Detector.detect`` is timed whole (resize to the height-adaptive scale, inference, decoding, NMS)
+on a rendered frame of each height (``bevflow.detect.benchmark.rendered_frame``: a crowd drawn
+at 1.5 x the detector's scale, as a camera's own frame is larger than the model's input). Without
+a model file (none given and none shipped) or without ONNX Runtime, nothing is timed and the
+result says why: no number is made up.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from bevflow.camera import FisheyeCamera
+from bevflow.detect.scaling import scaled_focal
+
+from bevflow_services.benchmarks.timing import percentile, time_calls
+
+HEIGHTS_M = (3.3, 5.5, 8.1)
+THREADS = (1, 2)
+
+
+def default_model() -> Path:
+    from bevflow.detect.runtime import DEFAULT_MODEL
+
+    return DEFAULT_MODEL
+
+
+def unavailable_reason(model: Path | None) -> str | None:
+    """Why the detector cannot be timed here, or None when it can."""
+    if importlib.util.find_spec("onnxruntime") is None:
+        return "onnxruntime is not installed"
+    path = model if model is not None else default_model()
+    if not path.is_file():
+        return "no detector model shipped" if model is None else f"detector model {path} does not exist"
+    return None
+
+
+def frame_for(height_m: float) -> tuple[np.ndarray, float]:
+    """A frame of a camera ``height_m`` up and its focal length (px/rad): rendered when the
+    renderer is available, else a textured stand-in of the same size (inference time depends
+    on the input size, not on what is in the picture)."""
+    try:
+        from bevflow.detect.benchmark import rendered_frame
+    except ImportError:
+        rendered_frame = None
+    if rendered_frame is not None:
+        return rendered_frame(height_m)
+    f = scaled_focal(height_m) * 1.5
+    size = int(math.ceil(2 * f * math.radians(92.5)))
+    cam = FisheyeCamera.looking_down((0.0, 0.0, height_m), (size, size), 185.0)
+    rng = np.random.default_rng(0)
+    return rng.integers(60, 200, (size, size, 3), dtype=np.uint8), float(cam.K[0, 0])
+
+
+def bench_detector(
+    model: Path | None = None,
+    heights_m: tuple[float, ...] = HEIGHTS_M,
+    threads: tuple[int, ...] = THREADS,
+    repeats: int = 30,
+    warmup: int = 3,
+    make_detector: Callable[[int], object] | None = None,
+) -> dict:
+    """One row per (height, threads): the model's input size and ms per frame, median and 90th
+    percentile of wall-clock time (ONNX Runtime works on threads of its own, so the calling
+    thread's CPU time would miss most of it). ``make_detector(threads)`` overrides how a
+    detector is built (tests pass a stand-in)."""
+    if make_detector is None:
+        reason = unavailable_reason(model)
+        if reason is not None:
+            return {"available": False, "reason": reason, "rows": []}
+        from bevflow.detect.runtime import Detector
+
+        def make_detector(n: int) -> object:
+            return Detector(model, threads=n)
+
+    rows = []
+    for height in heights_m:
+        frame, focal = frame_for(height)
+        for n in threads:
+            detector = make_detector(n)
+            shape = detector.prepare(frame, scaled_focal(height) / focal).tensor.shape  # type: ignore[attr-defined]
+            for _ in range(warmup):
+                detector.detect(frame, height, focal)  # type: ignore[attr-defined]
+            timing = time_calls(lambda: detector.detect(frame, height, focal), repeats)  # type: ignore[attr-defined]
+            rows.append({
+                "height_m": height,
+                "threads": n,
+                "frame": f"{frame.shape[1]}x{frame.shape[0]}",
+                "input": f"{shape[3]}x{shape[2]}",
+                "ms_p50": timing.wall_ms,
+                "ms_p90": percentile([s * 1e3 for s in timing.wall_s], 90),
+                "boxes": len(timing.result),  # type: ignore[arg-type]
+            })
+    return {"available": True, "reason": None, "rows": rows}
+
+
+def lookup(result: dict, height_m: float, threads: int) -> float | None:
+    """ms per frame of one row of ``bench_detector``'s result, None if it was not measured."""
+    for row in result["rows"]:
+        if math.isclose(row["height_m"], height_m) and row["threads"] == threads:
+            return float(row["ms_p50"])
+    return None

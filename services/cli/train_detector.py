@@ -1,0 +1,175 @@
+"""``bevflow train-detector``: render training data, train, export and evaluate the person detector.
+
+Training needs the optional ``train`` extra (torch); rendering and evaluation do not.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from bevflow_services.cli import UserError
+
+EPILOG = """\
+steps, each resumable (run the same command again to continue):
+  bevflow train-detector render --out data/train --count 4000            rendered training crops (.npz shards)
+  bevflow train-detector render-eval --out data/eval --count 100          held-out whole frames + COCO annotations
+  bevflow train-detector train --data data/train --out runs/a --steps 3000
+  bevflow train-detector train --coco my.json --images frames/ --out runs/b   your own annotated frames (COCO,
+                                                                         bbox [x,y,w,h] or rotated [cx,cy,w,h,deg])
+  bevflow train-detector export --checkpoint runs/a/checkpoint.pt --out model.onnx
+  bevflow evaluate --detector --model model.onnx --images data/eval --annotations data/eval/annotations.json
+
+Rendered crops are drawn at the detector's input scale (a person at the image centre ~20 px).
+COCO images are scaled from their 'camera_height_m' and 'focal_px' keys when present, else by --scale.
+Exit status: 0 on success, 2 for a usage or input error (message on stderr)."""
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "train-detector",
+        help="render data for, train, and export the overhead fisheye person detector",
+        description="Build the person detector: render synthetic ceiling fisheye frames, train the small "
+        "CenterNet-style network (needs torch: pip install 'bevflow[train]'), and export it to ONNX.",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    sub = parser.add_subparsers(dest="step", metavar="STEP", required=True)
+    render = sub.add_parser("render", help="render training crops into .npz shards")
+    render.add_argument("--out", type=Path, required=True, metavar="DIR", help="folder for the shards (resumes if it has some)")
+    render.add_argument("--count", type=int, default=4000, metavar="N", help="number of samples (default 4000)")
+    render.add_argument("--seed", type=int, default=1, metavar="N", help="random seed (default 1)")
+    render.set_defaults(func=_render)
+    evalset = sub.add_parser("render-eval", help="render held-out whole frames with COCO annotations")
+    evalset.add_argument("--out", type=Path, required=True, metavar="DIR", help="folder for the PNG frames and annotations.json")
+    evalset.add_argument("--count", type=int, default=100, metavar="N", help="number of frames (default 100)")
+    evalset.add_argument("--seed", type=int, default=1000, metavar="N", help="random seed, unlike the training seed (default 1000)")
+    evalset.set_defaults(func=_render_eval)
+    train = sub.add_parser("train", help="train (or continue training) the detector")
+    train.add_argument("--data", type=Path, metavar="DIR", help="rendered shards (from 'render')")
+    train.add_argument("--coco", type=Path, metavar="FILE", help="your own annotated frames, COCO JSON")
+    train.add_argument("--images", type=Path, metavar="DIR", help="folder of the COCO images (default: next to the JSON)")
+    train.add_argument("--coco-fraction", type=float, default=0.5, metavar="F", help="share of each batch from --coco when both are given (default 0.5)")
+    train.add_argument("--scale", type=float, default=1.0, metavar="F", help="resize factor for COCO images without camera_height_m/focal_px (default 1)")
+    train.add_argument("--out", type=Path, required=True, metavar="DIR", help="folder for checkpoint.pt (training resumes from it)")
+    train.add_argument("--steps", type=int, default=3000, metavar="N", help="total optimiser steps (default 3000)")
+    train.add_argument("--batch", type=int, default=16, metavar="N", help="batch size (default 16)")
+    train.add_argument("--crop", type=int, default=160, metavar="PX", help="training crop size, a multiple of 32 (default 160)")
+    train.add_argument("--lr", type=float, default=2e-3, metavar="F", help="peak learning rate (default 0.002)")
+    train.add_argument("--threads", type=int, default=1, metavar="N", help="CPU threads (default 1; more is slower on a busy machine)")
+    train.add_argument("--seed", type=int, default=0, metavar="N", help="random seed (default 0)")
+    train.set_defaults(func=_train)
+    export = sub.add_parser("export", help="write a checkpoint as one ONNX file (weights inside)")
+    export.add_argument("--checkpoint", type=Path, required=True, metavar="FILE", help="checkpoint.pt from 'train'")
+    export.add_argument("--out", type=Path, required=True, metavar="FILE", help="the .onnx file to write")
+    export.set_defaults(func=_export)
+
+
+def _count(value: int, name: str) -> int:
+    if value <= 0:
+        raise UserError(f"{name} must be positive, got {value}")
+    return value
+
+
+def _render(args: argparse.Namespace) -> int:
+    from bevflow.training.dataset import render_dataset
+
+    written = render_dataset(args.out, _count(args.count, "--count"), seed=args.seed, log=print)
+    print(f"{written} new shards in {args.out}")
+    return 0
+
+
+def _render_eval(args: argparse.Namespace) -> int:
+    from bevflow.training.dataset import render_evaluation_set
+
+    path = render_evaluation_set(args.out, _count(args.count, "--count"), seed=args.seed)
+    print(f"wrote {args.count} frames and {path}")
+    return 0
+
+
+def _torch_training():  # noqa: ANN202
+    try:
+        from bevflow.training import train
+    except ImportError as exc:
+        raise UserError(f"training needs torch ({exc.name} is missing): pip install 'bevflow[train]'") from None
+    return train
+
+
+def _train(args: argparse.Namespace) -> int:
+    train_mod = _torch_training()
+    from bevflow.detect.coco import CocoError, read_coco
+
+    if args.data is None and args.coco is None:
+        raise UserError("give --data DIR (rendered shards), --coco FILE (your frames), or both")
+    if args.crop % 32:
+        raise UserError(f"--crop must be a multiple of 32, got {args.crop}")
+    if args.data is not None and not any(args.data.glob("*.npz")):
+        raise UserError(f"--data {args.data} holds no .npz shards (make them with 'bevflow train-detector render')")
+    try:
+        coco = read_coco(args.coco, args.images) if args.coco is not None else None
+    except CocoError as exc:
+        raise UserError(str(exc)) from None
+    config = train_mod.TrainConfig(steps=_count(args.steps, "--steps"), batch=_count(args.batch, "--batch"), crop=args.crop,
+                                   lr=args.lr, threads=_count(args.threads, "--threads"), seed=args.seed)  # fmt: skip
+    try:
+        path = train_mod.train(args.data, args.out, config, log=lambda m: print(m, flush=True), coco=coco,
+                               coco_fraction=args.coco_fraction, coco_scale=args.scale)  # fmt: skip
+    except FileNotFoundError as exc:
+        raise UserError(str(exc)) from None
+    print(f"checkpoint: {path}")
+    return 0
+
+
+def _export(args: argparse.Namespace) -> int:
+    _torch_training()
+    from bevflow.training.export import export_onnx, load_checkpoint
+
+    if not args.checkpoint.is_file():
+        raise UserError(f"--checkpoint {args.checkpoint} does not exist")
+    out = export_onnx(load_checkpoint(args.checkpoint), args.out)
+    print(json.dumps({"model": str(out), "bytes": out.stat().st_size}))
+    return 0
+
+
+# --- `bevflow evaluate --detector --images DIR --annotations FILE` ---------------------------------
+def add_detector_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of ``bevflow evaluate`` that score the person detector on annotated frames."""
+    group = parser.add_argument_group("detector evaluation (--detector --images DIR --annotations FILE)")
+    group.add_argument("--detector", action="store_true", help="run the real person detector on images instead of using annotated boxes")
+    group.add_argument("--model", type=Path, metavar="PATH", help="the ONNX detector (default: the shipped model)")
+    group.add_argument("--annotations", type=Path, metavar="FILE", help="COCO JSON of the --images: bbox [x,y,w,h] or rotated [cx,cy,w,h,deg]")
+    group.add_argument("--threads", type=int, default=2, metavar="N", help="ONNX Runtime threads (default 2)")
+    group.add_argument("--camera-height", type=float, metavar="M", help="camera height for images without 'camera_height_m' (with --focal)")
+    group.add_argument("--focal", type=float, metavar="PX", help="focal length in px for images without 'focal_px' (with --camera-height)")
+    group.add_argument("--scale", type=float, default=1.0, metavar="F", help="resize factor when neither the images nor --camera-height/--focal give one (default 1)")
+
+
+def run_detector_evaluation(args: argparse.Namespace) -> int:
+    from bevflow.detect.coco import CocoError
+    from bevflow.detect.runtime import Detector, DetectorError
+    from bevflow.evaluation.detector import evaluate_detector
+
+    if not args.detector:
+        raise UserError("--images is for scoring the person detector: add --detector (and --annotations FILE)")
+    if args.annotations is None:
+        raise UserError("--detector --images DIR needs --annotations FILE (COCO JSON)")
+    if not args.images.is_dir():
+        raise UserError(f"--images {args.images} is not a folder")
+    if (args.camera_height is None) != (args.focal is None):
+        raise UserError("give --camera-height and --focal together")
+    try:
+        # Score every detection: AP needs the whole precision-recall curve.
+        detector = Detector(args.model, threads=_count(args.threads, "--threads"), score_threshold=0.05)
+        scores = evaluate_detector(detector, args.annotations, args.images, args.camera_height, args.focal, args.scale)
+    except (DetectorError, CocoError, FileNotFoundError) as exc:
+        raise UserError(str(exc)) from None
+    result = scores.as_dict()
+    print(f"{result['images']} images, {result['annotations']} people, {result['detections']} detections")
+    print(f"AP50 {scores.AP50:.3f}  precision {scores.precision:.3f}  recall {scores.recall:.3f}  F1 {scores.F1:.3f}  (score >= {scores.threshold:.3f})")
+    if args.json is not None:
+        try:
+            args.json.write_text(json.dumps(result, indent=2) + "\n")
+        except OSError as exc:
+            raise UserError(f"cannot write {args.json}: {exc.strerror or exc}") from None
+    return 0

@@ -1,0 +1,98 @@
+"""``Recorder``: the tracker's messages in, batches of rows out to the history database.
+
+Messages arrive on Zenoh threads and go into the pending ``Batch`` under a lock (cheap: a few
+dictionary updates); ``flush``, called by the service's main loop at least once a second, swaps
+the batch out and writes it in one transaction. If the database does not answer, the batch goes
+back in front of what arrived meanwhile and the next flush tries again; alerts are never dropped,
+while occupancy and positions are capped (oldest dropped first) so memory stays bounded during a
+long database outage.
+
+What a hard kill loses: the pending batch, that is what arrived since the last flush began. For
+occupancy and positions that is at most one flush interval plus one write. Alerts lost that way
+come back when the recorder restarts: it subscribes to alerts with
+``bus.HistorySubscription``, which fetches what the tracker's ``bus.CachedPublication`` still
+caches, and writing an alert twice changes nothing (see ``storage.batch``).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import Counter
+from collections.abc import Callable
+
+from bevflow.schemas import Event, Occupancy, Tracks
+
+from bevflow_services.storage import Batch, HistoryDatabase, StorageUnavailable, TrackSampler
+
+log = logging.getLogger(__name__)
+
+
+class Recorder:
+    """Gathers messages between flushes and writes them to ``db``.
+
+    Args:
+        track_period_s: one stored position per track per this many seconds of capture time.
+        max_pending_rows: while the database is down, keep at most this many occupancy rows and
+            as many positions (alerts are always kept).
+        clock: wall-clock nanoseconds, stored with each alert as when it was recorded.
+    """
+
+    def __init__(self, db: HistoryDatabase, *, track_period_s: float = 1.0, max_pending_rows: int = 1_000_000,
+                 clock: Callable[[], int] = time.time_ns) -> None:
+        self.db = db
+        self.max_pending_rows = max_pending_rows
+        self.clock = clock
+        self.counts: Counter[str] = Counter()
+        self._lock = threading.Lock()
+        self._pending = Batch()
+        # Resume sampling after the newest stored position, so a restart mid-second does not
+        # store a second sample in the same period.
+        self._sampler = TrackSampler(track_period_s, db.newest_track_time_ns())
+
+    # --- input, on Zenoh threads ----------------------------------------------------------------
+    def on_occupancy(self, occupancy: Occupancy) -> None:
+        with self._lock:
+            self._pending.add_occupancy(occupancy)
+            self.counts["occupancy"] += 1
+
+    def on_tracks(self, tracks: Tracks) -> None:
+        with self._lock:
+            if self._sampler.keep(tracks.time_ns):
+                self._pending.add_track_sample(tracks)
+                self.counts["track_samples"] += 1
+
+    def on_event(self, event: Event) -> None:
+        with self._lock:
+            self._pending.add_event(event)
+            self.counts["events"] += 1
+
+    # --- output, on the main thread -------------------------------------------------------------
+    def pending(self) -> int:
+        """Rows waiting for the next flush."""
+        with self._lock:
+            return len(self._pending)
+
+    def flush(self) -> int:
+        """Write what is pending in one transaction; returns the rows written. Raises
+        ``StorageUnavailable`` (after putting the rows back) when the database does not answer."""
+        with self._lock:
+            batch, self._pending = self._pending, Batch()
+        if not batch:
+            return 0
+        try:
+            self.db.write(batch, recorded_ns=self.clock())
+        except StorageUnavailable:
+            with self._lock:
+                batch.merge(self._pending)
+                self._pending = batch
+                dropped = batch.drop_oldest_samples(self.max_pending_rows)
+            self.counts["failed_flushes"] += 1
+            if dropped:
+                self.counts["dropped_rows"] += dropped
+                log.warning("database down: dropped the %d oldest occupancy/position rows held for it", dropped)
+            raise
+        self.counts["flushes"] += 1
+        self.counts["rows_written"] += len(batch)
+        return len(batch)

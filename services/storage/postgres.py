@@ -1,0 +1,102 @@
+"""PostgreSQL, for larger sites or a database shared with other tools (``postgresql://`` URLs).
+
+One connection, shared by the threads of a process (calls are serialised). A write on a lost
+connection (the server restarted) raises ``StorageUnavailable``, and the next call connects again,
+so the recorder keeps its unwritten batch and retries; a read is simply tried again at once.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from typing import Any
+
+import psycopg
+
+from bevflow_services.storage.backend import Dialect, Row, redact
+from bevflow_services.storage.records import StorageError, StorageUnavailable
+
+DIALECT = Dialect(
+    name="postgresql",
+    id_pk="BIGINT GENERATED ALWAYS AS IDENTITY PRIMARY KEY",
+    key_text='TEXT COLLATE "C"',
+    # Two processes starting together (recorder and gateway) must not both create the tables.
+    migration_lock="SELECT pg_advisory_xact_lock(7201507)",
+)
+
+
+def _sql(statement: str) -> str:
+    """Placeholders in psycopg's style; the shared SQL never contains a literal ``?`` or ``%``."""
+    return statement.replace("?", "%s")
+
+
+class _Cursor:
+    def __init__(self, cursor: psycopg.Cursor[Any]) -> None:
+        self._cursor = cursor
+
+    def execute(self, sql: str, params: Sequence[Any] = ()) -> list[Row]:
+        self._cursor.execute(_sql(sql), tuple(params))
+        return [tuple(r) for r in self._cursor.fetchall()] if self._cursor.description else []
+
+    def executemany(self, sql: str, rows: Sequence[Sequence[Any]]) -> None:
+        if rows:
+            self._cursor.executemany(_sql(sql), [tuple(r) for r in rows])
+
+    def rowcount(self, sql: str, params: Sequence[Any] = ()) -> int:
+        self._cursor.execute(_sql(sql), tuple(params))
+        return self._cursor.rowcount
+
+
+class PostgresBackend:
+    dialect = DIALECT
+
+    def __init__(self, url: str, *, connect_timeout_s: int = 10) -> None:
+        self.url = redact(url)
+        self._dsn = url
+        self._connect_timeout_s = connect_timeout_s
+        self._lock = threading.RLock()
+        self._conn: psycopg.Connection[Any] | None = None
+        try:
+            self._connection()
+        except StorageUnavailable as exc:
+            raise StorageError(str(exc)) from None
+
+    def _connection(self) -> psycopg.Connection[Any]:
+        if self._conn is not None and not self._conn.closed and not self._conn.broken:
+            return self._conn
+        try:
+            self._conn = psycopg.connect(self._dsn, autocommit=True, connect_timeout=self._connect_timeout_s)
+        except psycopg.Error as exc:
+            reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            raise StorageUnavailable(f"database {self.url}: cannot connect: {reason}") from None
+        return self._conn
+
+    @contextmanager
+    def transaction(self) -> Iterator[_Cursor]:
+        with self._lock:
+            conn = self._connection()
+            try:
+                with conn.transaction(), conn.cursor() as cursor:
+                    yield _Cursor(cursor)
+            except psycopg.OperationalError as exc:
+                raise StorageUnavailable(f"database {self.url}: {str(exc).strip()}") from None
+
+    def query(self, sql: str, params: Sequence[Any] = ()) -> list[Row]:
+        """Run a read; one that fails on a connection found broken is tried once more on a new
+        one (reads are safe to repeat, and the server may simply have restarted since the last)."""
+        with self._lock:
+            for attempt in (1, 2):
+                conn = self._connection()
+                try:
+                    with conn.cursor() as cursor:
+                        return _Cursor(cursor).execute(sql, params)
+                except psycopg.OperationalError as exc:
+                    if attempt == 2 or not conn.broken:
+                        raise StorageUnavailable(f"database {self.url}: {str(exc).strip()}") from None
+            raise AssertionError("unreachable")
+
+    def close(self) -> None:
+        with self._lock:
+            if self._conn is not None:
+                self._conn.close()

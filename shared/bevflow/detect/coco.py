@@ -1,0 +1,95 @@
+"""COCO-style person annotations for overhead fisheye frames, axis-aligned or rotated.
+
+COCO files may hold axis-aligned ``bbox`` [x, y, w, h] or the rotated [cx, cy, w, h, degrees]
+used by public overhead fisheye sets (CEPDOF, WEPDTOF); only the person category is read. A
+rotated box counts as its enclosing axis-aligned rectangle wherever axis-aligned boxes are
+compared (the detector's boxes are axis-aligned, the paper's D). Images may carry
+``camera_height_m`` and ``focal_px`` for height-adaptive scaling.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True, eq=False)
+class CocoImage:
+    """One annotated image: its file and person boxes as rotated rectangles (cx, cy, w, h, deg);
+    axis-aligned annotations have angle 0."""
+
+    path: Path
+    rotated: FloatArray  # (N, 5)
+    camera_height_m: float | None = None
+    focal_px: float | None = None
+
+    @property
+    def xyxy(self) -> FloatArray:
+        return rotated_to_xyxy(self.rotated)
+
+
+class CocoError(ValueError):
+    """A COCO file that cannot be read; the message says why."""
+
+
+def read_coco(annotations: Path, images_dir: Path | None = None) -> list[CocoImage]:
+    """Person boxes per image from a COCO JSON file. ``bbox`` of 4 numbers is [x, y, w, h]; of 5,
+    the rotated [cx, cy, w, h, degrees]. Images without annotations are kept (no people).
+    Optional per-image keys ``camera_height_m`` and ``focal_px`` enable height-adaptive scaling."""
+    try:
+        doc = json.loads(Path(annotations).read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise CocoError(f"cannot read {annotations}: {exc}") from None
+    if not isinstance(doc, dict) or "images" not in doc or "annotations" not in doc:
+        raise CocoError(f"{annotations} is not a COCO file (needs 'images' and 'annotations')")
+    cats = doc.get("categories") or []
+    person = {c["id"] for c in cats if str(c.get("name", "")).lower() == "person"} or ({c["id"] for c in cats} if len(cats) == 1 else None)
+    folder = Path(images_dir) if images_dir is not None else Path(annotations).parent
+    boxes: dict[object, list[list[float]]] = {im["id"]: [] for im in doc["images"]}
+    for ann in doc["annotations"]:
+        if person is not None and ann.get("category_id") not in person:
+            continue
+        b = [float(v) for v in ann["bbox"]]
+        if len(b) == 4:
+            b = [b[0] + b[2] / 2, b[1] + b[3] / 2, b[2], b[3], 0.0]
+        elif len(b) != 5:
+            raise CocoError(f"annotation {ann.get('id')}: bbox needs 4 or 5 numbers, got {len(b)}")
+        if ann["image_id"] not in boxes:
+            raise CocoError(f"annotation {ann.get('id')} refers to unknown image {ann['image_id']}")
+        boxes[ann["image_id"]].append(b)
+    return [
+        CocoImage(folder / im["file_name"], np.array(boxes[im["id"]], dtype=np.float64).reshape(-1, 5),
+                  im.get("camera_height_m"), im.get("focal_px"))
+        for im in doc["images"]
+    ]  # fmt: skip
+
+
+def rotated_to_xyxy(rotated: FloatArray) -> FloatArray:
+    """(N, 5) rotated rectangles (cx, cy, w, h, degrees) → (N, 4) enclosing axis-aligned boxes."""
+    r = np.asarray(rotated, dtype=np.float64).reshape(-1, 5)
+    a = np.radians(r[:, 4])
+    hw = (np.abs(np.cos(a)) * r[:, 2] + np.abs(np.sin(a)) * r[:, 3]) / 2
+    hh = (np.abs(np.sin(a)) * r[:, 2] + np.abs(np.cos(a)) * r[:, 3]) / 2
+    return np.stack([r[:, 0] - hw, r[:, 1] - hh, r[:, 0] + hw, r[:, 1] + hh], 1)
+
+
+
+def write_coco(path: Path, images: list[dict], boxes: list[FloatArray]) -> None:
+    """Write axis-aligned person boxes (one (N, 4) xyxy array per image) as COCO JSON. ``images``
+    are COCO image entries (``file_name``, ``width``, ``height``, optional extras); ids are
+    assigned in order."""
+    out_images, annotations = [], []
+    for i, (im, xyxy) in enumerate(zip(images, boxes, strict=True), start=1):
+        out_images.append({"id": i, **im})
+        for x0, y0, x1, y1 in np.asarray(xyxy, dtype=np.float64).reshape(-1, 4):
+            annotations.append({"id": len(annotations) + 1, "image_id": i, "category_id": 1,
+                                "bbox": [round(x0, 2), round(y0, 2), round(x1 - x0, 2), round(y1 - y0, 2)],
+                                "area": round((x1 - x0) * (y1 - y0), 2), "iscrowd": 0})  # fmt: skip
+    doc = {"images": out_images, "annotations": annotations, "categories": [{"id": 1, "name": "person"}]}
+    Path(path).write_text(json.dumps(doc))

@@ -1,0 +1,218 @@
+"""The person detector at run time: ONNX Runtime, height-adaptive scaling, decoding, NMS.
+
+``Detector(model_path, threads).detect(image_bgr, camera_height_m, focal_px)`` resizes the frame
+so a person at the image centre is about 20 px across (``bevflow.detect.scaling``), runs the
+model, decodes its outputs (``bevflow.detect.decoders``) and returns ``Boxes`` in the ORIGINAL
+frame's pixels. Models with a dynamic input size get the scaled frame padded to a multiple of 32
+at the bottom and right; models with a fixed input size (most YOLO exports) get it letterboxed
+(scaled to fit, grey padding). ``detect_batch`` runs several cameras' frames in one call where
+their padded sizes match (cameras at the same height), which amortises the per-call overhead.
+
+``DetectorBank`` picks a model by mounting height (the paper uses one for 3–6 m and one for
+6–10 m): a list of ``HeightRange(min_m, max_m, model)``.
+
+>>> det = Detector()  # the shipped model, 2 threads  # doctest: +SKIP
+>>> boxes = det.detect(frame, camera_height_m=3.3, focal_px=326.0)  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from bevflow.detect.decoders import FORMATS, decode_centernet, decode_yolov5, decode_yolov8, decode_yolox, guess_format, nms
+from bevflow.detect.scaling import scale_factor
+from bevflow.detections import Boxes
+
+DEFAULT_MODEL = Path(__file__).resolve().parent.parent / "data" / "models" / "bevflow-person-centernet.onnx"
+PAD_MULTIPLE = 32
+LETTERBOX_GREY = 114
+
+
+class DetectorError(RuntimeError):
+    """A model file that cannot be loaded or understood; the message says why."""
+
+
+@dataclass(frozen=True)
+class PreparedInput:
+    """A frame made ready for the model: the tensor (1, 3, H, W) float32 and how to map boxes
+    in the model's input pixels back to the frame: frame = (model − pad) / scale, with the
+    half-pixel shift of pixel-centre coordinates."""
+
+    tensor: NDArray[np.float32]
+    scale: float
+    pad: tuple[float, float]
+
+
+class Detector:
+    """One ONNX person detector. ``model_format`` is one of ``decoders.FORMATS`` or "auto";
+    ``rgb`` and ``input_scale`` say what the model expects (defaults: BGR 0–255 for the
+    project's model and YOLOX, RGB 0–1 for YOLOv5/v8)."""
+
+    def __init__(
+        self,
+        model_path: str | Path | None = None,
+        threads: int = 2,
+        score_threshold: float = 0.4,
+        nms_iou: float = 0.5,
+        model_format: str = "auto",
+        person_class: int = 0,
+        rgb: bool | None = None,
+        input_scale: float | None = None,
+        session: object | None = None,
+    ) -> None:
+        self.model_path = Path(model_path) if model_path is not None else DEFAULT_MODEL
+        # ``session``: anything with ONNX Runtime's get_inputs / get_outputs / run (tests, or a
+        # session built with other execution providers).
+        self.session = session if session is not None else _load_session(self.model_path, threads)
+        inp = self.session.get_inputs()[0]
+        self.input_name = inp.name
+        h, w = inp.shape[2], inp.shape[3]
+        self.fixed_hw = (h, w) if isinstance(h, int) and isinstance(w, int) else None
+        shapes = [o.shape for o in self.session.get_outputs()]
+        if model_format == "auto":
+            model_format = guess_format(shapes, self.fixed_hw or (640, 640))
+        if model_format not in FORMATS:
+            raise DetectorError(f"unknown detector format {model_format!r}; choose one of: auto, {', '.join(FORMATS)}")
+        self.format = model_format
+        yolo_like = model_format in ("yolov5", "yolov8")
+        self.rgb = yolo_like if rgb is None else rgb
+        self.input_scale = (1 / 255.0 if yolo_like else 1.0) if input_scale is None else input_scale
+        self.score_threshold, self.nms_iou, self.person_class = score_threshold, nms_iou, person_class
+
+    # --- public API ----------------------------------------------------------------------------
+    def detect(self, image_bgr: NDArray[np.uint8], camera_height_m: float, focal_px: float) -> Boxes:
+        """Person boxes in ``image_bgr`` (H, W, 3) of a camera ``camera_height_m`` above the floor
+        whose focal length is ``focal_px`` (px/rad, K[0, 0] of its calibration)."""
+        return self.detect_scaled(image_bgr, scale_factor(camera_height_m, focal_px))
+
+    def detect_scaled(self, image_bgr: NDArray[np.uint8], scale: float = 1.0) -> Boxes:
+        """As ``detect``, with the resize factor given directly (1.0: the frame is already at
+        the detector's scale, e.g. rendered for it)."""
+        prepared = self.prepare(image_bgr, scale)
+        outputs = self.session.run(None, {self.input_name: prepared.tensor})
+        return self._boxes(outputs, 0, prepared, prepared.tensor.shape[2:])
+
+    def detect_batch(self, images: Sequence[NDArray[np.uint8]], heights_m: Sequence[float], focals_px: Sequence[float]) -> list[Boxes]:
+        """``detect`` for several frames; frames whose model inputs have the same size share one
+        inference call (only for models with a dynamic batch axis)."""
+        prepared = [self.prepare(im, scale_factor(h, f)) for im, h, f in zip(images, heights_m, focals_px, strict=True)]
+        out: list[Boxes | None] = [None] * len(prepared)
+        groups: dict[tuple[int, ...], list[int]] = {}
+        batched = not isinstance(self.session.get_inputs()[0].shape[0], int)
+        for i, p in enumerate(prepared):
+            groups.setdefault(p.tensor.shape if batched else (i,), []).append(i)
+        for members in groups.values():
+            tensor = np.concatenate([prepared[i].tensor for i in members])
+            outputs = self.session.run(None, {self.input_name: tensor})
+            for k, i in enumerate(members):
+                out[i] = self._boxes(outputs, k, prepared[i], tensor.shape[2:])
+        return [b if b is not None else Boxes.empty() for b in out]
+
+    def prepare(self, image_bgr: NDArray[np.uint8], scale: float) -> PreparedInput:
+        """Resize (and pad or letterbox) a frame into the model's input tensor."""
+        image = np.asarray(image_bgr)
+        if image.ndim != 3 or image.shape[2] != 3:
+            raise ValueError(f"expected an (H, W, 3) BGR image, got shape {image.shape}")
+        h, w = image.shape[:2]
+        if self.fixed_hw is not None:  # letterbox: fit inside, keep the aspect ratio
+            scale = min(self.fixed_hw[0] / h, self.fixed_hw[1] / w)
+            th, tw = self.fixed_hw
+        sw, sh = max(int(round(w * scale)), 1), max(int(round(h * scale)), 1)
+        if (sw, sh) != (w, h):
+            image = cv2.resize(image, (sw, sh), interpolation=cv2.INTER_AREA if scale < 1 else cv2.INTER_LINEAR)
+        if self.fixed_hw is None:
+            th, tw = -(-sh // PAD_MULTIPLE) * PAD_MULTIPLE, -(-sw // PAD_MULTIPLE) * PAD_MULTIPLE
+            pad, fill = (0, 0), 0
+        else:
+            pad, fill = ((tw - sw) // 2, (th - sh) // 2), LETTERBOX_GREY
+        canvas = np.full((th, tw, 3), fill, dtype=np.uint8)
+        canvas[pad[1] : pad[1] + sh, pad[0] : pad[0] + sw] = image
+        if self.rgb:
+            canvas = canvas[..., ::-1]
+        tensor = np.ascontiguousarray(canvas.transpose(2, 0, 1)[None], dtype=np.float32)
+        if self.input_scale != 1.0:
+            tensor *= np.float32(self.input_scale)
+        # The resize factor actually applied per axis is sw / w; use the mean (they differ < 1 px).
+        return PreparedInput(tensor, 0.5 * (sw / w + sh / h), (float(pad[0]), float(pad[1])))
+
+    # --- decoding -------------------------------------------------------------------------------
+    def _boxes(self, outputs: list[np.ndarray], k: int, prepared: PreparedInput, input_hw: tuple[int, ...]) -> Boxes:
+        one = [o[k : k + 1] for o in outputs]
+        thr = self.score_threshold
+        if self.format == "centernet":
+            xyxy, scores = decode_centernet(one[0], one[1], one[2], thr)
+        elif self.format == "yolov5":
+            xyxy, scores = decode_yolov5(one[0][0], thr, self.person_class)
+        elif self.format == "yolov8":
+            xyxy, scores = decode_yolov8(one[0][0], thr, self.person_class)
+        else:
+            xyxy, scores = decode_yolox(one[0][0], (int(input_hw[0]), int(input_hw[1])), thr, self.person_class)
+        keep = nms(xyxy, scores, self.nms_iou)
+        xyxy, scores = xyxy[keep], scores[keep]
+        # Model pixels → frame pixels (pixel-centre coordinates: u = (u' + 0.5) / s − 0.5).
+        px, py = prepared.pad
+        s = prepared.scale
+        xyxy = (xyxy - [px, py, px, py] + 0.5) / s - 0.5
+        return Boxes(xyxy=xyxy, confidence=scores)
+
+
+def _load_session(path: Path, threads: int) -> object:
+    import onnxruntime as ort  # imported here so the rest of the core library loads without it
+
+    if not path.is_file():
+        raise DetectorError(f"detector model {path} does not exist")
+    options = ort.SessionOptions()
+    options.intra_op_num_threads = max(int(threads), 1)
+    options.inter_op_num_threads = 1
+    try:
+        return ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+    except Exception as exc:  # onnxruntime raises its own exception types
+        raise DetectorError(f"cannot load detector model {path}: {exc}") from None
+
+
+@dataclass(frozen=True)
+class HeightRange:
+    """Cameras mounted from ``min_m`` (inclusive) to ``max_m`` (exclusive) use ``model``."""
+
+    min_m: float
+    max_m: float
+    model: str | Path | None = None
+
+
+class DetectorBank:
+    """One detector per mounting-height range; ranges must not overlap. Detectors load lazily,
+    so a site whose cameras are all in one range loads one model."""
+
+    def __init__(self, ranges: Sequence[HeightRange], threads: int = 2, **options: object) -> None:
+        ordered = sorted(ranges, key=lambda r: r.min_m)
+        for a, b in zip(ordered, ordered[1:], strict=False):
+            if b.min_m < a.max_m:
+                raise ValueError(f"detector height ranges overlap: [{a.min_m}, {a.max_m}) and [{b.min_m}, {b.max_m})")
+        for r in ordered:
+            if not r.min_m < r.max_m:
+                raise ValueError(f"detector height range [{r.min_m}, {r.max_m}) is empty")
+        self.ranges = ordered
+        self.threads, self.options = threads, options
+        self._loaded: dict[int, Detector] = {}
+
+    def for_height(self, camera_height_m: float) -> Detector:
+        for i, r in enumerate(self.ranges):
+            if r.min_m <= camera_height_m < r.max_m:
+                if i not in self._loaded:
+                    self._loaded[i] = Detector(r.model, self.threads, **self.options)  # type: ignore[arg-type]
+                return self._loaded[i]
+        spans = ", ".join(f"[{r.min_m}, {r.max_m})" for r in self.ranges)
+        raise ValueError(f"no detector model covers a camera {camera_height_m} m high (ranges: {spans})")
+
+    def detect(self, image_bgr: NDArray[np.uint8], camera_height_m: float, focal_px: float) -> Boxes:
+        return self.for_height(camera_height_m).detect(image_bgr, camera_height_m, focal_px)
+
+
+# The shipped model covers every supported height (trained on renders from 3 to 10 m).
+DEFAULT_RANGES = (HeightRange(0.0, 100.0, None),)

@@ -1,0 +1,122 @@
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from bevflow.camera import FisheyeCamera
+from bevflow.detect.runtime import DEFAULT_MODEL, Detector, DetectorBank, DetectorError, HeightRange
+from bevflow.detect.scaling import scale_factor, scaled_focal
+
+
+class FakeCenterNet:
+    """An ONNX-Runtime-like session that 'detects' one box centred on the input's brightest pixel,
+    20 x 30 input pixels, and records what it was given."""
+
+    def __init__(self, fixed_hw: tuple[int, int] | None = None) -> None:
+        shape = [1, 3, *(fixed_hw or ("h", "w"))] if fixed_hw else ["batch", 3, "h", "w"]
+        self.inputs = [SimpleNamespace(name="image", shape=shape)]
+        self.seen: list[np.ndarray] = []
+
+    def get_inputs(self):  # noqa: ANN201
+        return self.inputs
+
+    def get_outputs(self):  # noqa: ANN201
+        return [SimpleNamespace(shape=["b", 1, "h", "w"])] * 3
+
+    def run(self, _names, feeds):  # noqa: ANN001, ANN201
+        x = feeds["image"]
+        self.seen.append(x)
+        b, _, h, w = x.shape
+        heat = np.zeros((b, 1, h // 4, w // 4), np.float32)
+        size = np.zeros((b, 2, h // 4, w // 4), np.float32)
+        offset = np.zeros((b, 2, h // 4, w // 4), np.float32)
+        for k in range(b):
+            y, xx = np.unravel_index(x[k].sum(0).argmax(), (h, w))
+            cy, cx = (y + 0.5) / 4, (xx + 0.5) / 4
+            i, j = int(cy), int(cx)
+            heat[k, 0, i, j] = 0.9
+            size[k, :, i, j] = (20.0, 30.0)
+            offset[k, :, i, j] = (cx - j, cy - i)
+        return [heat, size, offset]
+
+
+def _frame(w: int, h: int, bright: tuple[int, int]) -> np.ndarray:
+    img = np.zeros((h, w, 3), np.uint8)
+    img[bright[1], bright[0]] = 255
+    return img
+
+
+@pytest.mark.parametrize(("height", "focal", "bright"), [(3.3, 300.0, (400, 300)), (8.1, 500.0, (123, 456)), (5.5, 164.0, (50, 60))])
+def test_boxes_come_back_in_frame_pixels(height: float, focal: float, bright: tuple[int, int]) -> None:
+    fake = FakeCenterNet()
+    det = Detector(session=fake, score_threshold=0.5)
+    boxes = det.detect(_frame(800, 600, bright), height, focal)
+    s = scale_factor(height, focal)
+    h, w = fake.seen[0].shape[2:]
+    assert h % 32 == 0 and w % 32 == 0
+    assert (w, h) == (-(-round(800 * s) // 32) * 32, -(-round(600 * s) // 32) * 32)
+    (x0, y0, x1, y1), = boxes.xyxy
+    # The centre maps back near the bright pixel (within one input pixel), the size by 1/s.
+    assert abs((x0 + x1) / 2 - bright[0]) <= 1.0 / s + 0.5
+    assert abs((y0 + y1) / 2 - bright[1]) <= 1.0 / s + 0.5
+    assert (x1 - x0) == pytest.approx(20.0 / s, rel=0.02)
+    assert (y1 - y0) == pytest.approx(30.0 / s, rel=0.02)
+
+
+def test_fixed_size_models_get_a_letterbox() -> None:
+    fake = FakeCenterNet(fixed_hw=(320, 320))
+    det = Detector(session=fake, score_threshold=0.5, model_format="centernet")
+    frame = np.zeros((320, 640, 3), np.uint8)
+    frame[198:202, 318:322] = 255  # a block: it stays brighter than the grey bars after the resize
+    boxes = det.detect(frame, 3.3, 300.0)
+    x = fake.seen[0]
+    assert x.shape == (1, 3, 320, 320)
+    assert x[0, :, 0, 0].tolist() == [114.0] * 3  # the grey bars above and below
+    (x0, y0, x1, y1), = boxes.xyxy
+    assert abs((x0 + x1) / 2 - 320) <= 2.5 and abs((y0 + y1) / 2 - 200) <= 2.5
+
+
+def test_batch_matches_one_by_one() -> None:
+    det = Detector(session=FakeCenterNet(), score_threshold=0.5)
+    frames = [_frame(400, 400, (100, 200)), _frame(400, 400, (300, 50)), _frame(200, 300, (20, 30))]
+    heights, focals = [3.3, 3.3, 6.0], [200.0, 200.0, 150.0]
+    batch = det.detect_batch(frames, heights, focals)
+    for f, h, fo, b in zip(frames, heights, focals, batch, strict=True):
+        np.testing.assert_allclose(b.xyxy, det.detect(f, h, fo).xyxy)
+
+
+def test_unknown_format_and_missing_model_are_clear_errors(tmp_path) -> None:  # noqa: ANN001
+    with pytest.raises(DetectorError, match="unknown detector format"):
+        Detector(session=FakeCenterNet(), model_format="ssd")
+    with pytest.raises(DetectorError, match="does not exist"):
+        Detector(tmp_path / "missing.onnx")
+
+
+def test_bank_picks_the_model_by_height() -> None:
+    bank = DetectorBank([HeightRange(6.0, 10.0, "high.onnx"), HeightRange(3.0, 6.0, "low.onnx")])
+    assert [r.model for r in bank.ranges] == ["low.onnx", "high.onnx"]
+    with pytest.raises(ValueError, match="no detector model covers"):
+        bank.for_height(12.0)
+    with pytest.raises(ValueError, match="overlap"):
+        DetectorBank([HeightRange(3.0, 6.5), HeightRange(6.0, 10.0)])
+
+
+@pytest.mark.skipif(not DEFAULT_MODEL.is_file(), reason="the shipped model is not in this checkout")
+@pytest.mark.parametrize("height", [3.3, 6.0])
+def test_shipped_model_finds_a_rendered_person(height: float) -> None:
+    from bevflow.sim.bodies import BodyShape, pose_bodies
+    from bevflow.sim.render import FisheyeRenderer, Room
+
+    f = scaled_focal(height) * 1.2  # a frame a little larger than the detector's input
+    size = int(math.ceil(2 * f * math.radians(92.5)))
+    cam = FisheyeCamera.looking_down((0.0, 0.0, height), (size, size), 185.0)
+    bodies = pose_bodies(BodyShape.standard(2), np.array([[1.0, 0.5], [-1.5, -1.0]]), np.zeros(2), np.zeros(2), np.zeros(2), np.ones(2, int))
+    out = FisheyeRenderer(cam, Room((-8.0, -8.0, 8.0, 8.0))).render(bodies, np.array([1, 2]))
+    found = Detector(threads=1).detect(out.image, height, cam.K[0, 0])
+    for truth in out.boxes.xyxy:
+        cx, cy = (truth[0] + truth[2]) / 2, (truth[1] + truth[3]) / 2
+        centres = (found.xyxy[:, :2] + found.xyxy[:, 2:]) / 2
+        assert np.hypot(*(centres - (cx, cy)).T).min() < 0.3 * max(truth[2] - truth[0], truth[3] - truth[1]) + 2

@@ -1,0 +1,63 @@
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bevflow.detections import Boxes
+
+from bevflow_services.benchmarks import detector as detector_bench
+from bevflow_services.benchmarks.detector import bench_detector, lookup, unavailable_reason
+
+
+def test_a_missing_model_is_named_and_nothing_is_timed(tmp_path: Path) -> None:
+    missing = tmp_path / "none.onnx"
+    reason = unavailable_reason(missing)
+    assert reason is not None and "none.onnx" in reason
+    result = bench_detector(missing)
+    assert result == {"available": False, "reason": reason, "rows": []}
+
+
+def test_no_shipped_model_says_so(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(detector_bench, "default_model", lambda: tmp_path / "bevflow-person-centernet.onnx")
+    if unavailable_reason(None) == "onnxruntime is not installed":
+        pytest.skip("onnxruntime is not installed")
+    assert unavailable_reason(None) == "no detector model shipped"
+
+
+class FakeDetector:
+    """Stands in for ``Detector``: a fixed input size per height, two boxes per frame."""
+
+    def __init__(self, threads: int) -> None:
+        self.threads = threads
+        self.calls = 0
+
+    def prepare(self, image: np.ndarray, scale: float):  # noqa: ANN201
+        side = int(round(image.shape[0] * scale / 32)) * 32
+
+        class Prepared:
+            tensor = np.zeros((1, 3, side, side), np.float32)
+
+        return Prepared()
+
+    def detect(self, image: np.ndarray, height: float, focal: float) -> Boxes:
+        self.calls += 1
+        return Boxes(xyxy=np.array([[0.0, 0.0, 5.0, 5.0], [1.0, 1.0, 9.0, 9.0]]))
+
+
+def test_every_height_and_thread_count_gets_a_row(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(detector_bench, "frame_for", lambda h: (np.zeros((int(100 * h), int(100 * h), 3), np.uint8), 100.0 * h / 3))
+    made: list[FakeDetector] = []
+
+    def make(threads: int) -> FakeDetector:
+        made.append(FakeDetector(threads))
+        return made[-1]
+
+    result = bench_detector(heights_m=(3.3, 8.1), threads=(1, 2), repeats=4, warmup=1, make_detector=make)
+    assert result["available"] and result["reason"] is None
+    assert [(r["height_m"], r["threads"]) for r in result["rows"]] == [(3.3, 1), (3.3, 2), (8.1, 1), (8.1, 2)]
+    assert [d.calls for d in made] == [5, 5, 5, 5]  # warm-up + repeats
+    assert all(r["boxes"] == 2 and r["ms_p50"] >= 0 for r in result["rows"])
+    assert lookup(result, 3.3, 2) == result["rows"][1]["ms_p50"]
+    assert lookup(result, 5.5, 2) is None

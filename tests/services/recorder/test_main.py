@@ -1,0 +1,71 @@
+"""The recorder's command line and main loop (the process itself: test_durability.py)."""
+
+from __future__ import annotations
+
+import threading
+from pathlib import Path
+
+import pytest
+
+from bevflow_services.cli import UserError
+from bevflow_services.cli.serve import run_service
+from bevflow_services.recorder.main import run
+from bevflow_services.storage import RetentionPolicy, RetentionResult, StorageUnavailable
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--commit-interval", "2"], "--commit-interval must be between 0.05 and 1 s"),
+        (["--track-period", "0"], "--track-period must be positive"),
+        (["--fine-days", "30", "--occupancy-days", "7"], "--fine-days .* must not exceed --occupancy-days"),
+        (["--track-days", "0"], "--track-days must be positive"),
+        (["--db", "mysql://db/history"], "use a SQLite file path"),
+    ],
+)
+def test_bad_arguments_are_one_line_for_the_user(tmp_path: Path, extra: list[str], message: str) -> None:
+    argv = ["--site", "example-hall", "--db", str(tmp_path / "h.db"), *extra]
+    with pytest.raises(UserError, match=message):
+        run_service("recorder", argv)
+
+
+class Loop:
+    """A recorder and database that count calls, fail when told to, and stop the loop after ``calls`` flushes."""
+
+    def __init__(self, calls: int, retention_done: list[bool], flush_failures: int = 0) -> None:
+        self.stop = threading.Event()
+        self.calls, self.flushes, self.retentions = calls, 0, 0
+        self.retention_done = retention_done
+        self.flush_failures = flush_failures
+        self.db = self
+
+    def flush(self) -> int:
+        self.flushes += 1
+        if self.flushes >= self.calls:
+            self.stop.set()
+        if self.flush_failures:
+            self.flush_failures -= 1
+            raise StorageUnavailable("down")
+        return 0
+
+    def pending(self) -> int:
+        return 0
+
+    def apply_retention(self, policy: RetentionPolicy, now_ns: int) -> RetentionResult:
+        self.retentions += 1
+        return RetentionResult(done=self.retention_done.pop(0) if self.retention_done else True)
+
+
+@pytest.mark.parametrize(
+    ("retention_done", "flush_failures", "retentions"),
+    [
+        ([True], 0, 1),  # once at start, then not before retention_every
+        ([False, False, True], 0, 3),  # a backlog: one slice per flush until done
+        ([True], 3, 1),  # a database down for three flushes: the loop goes on, retention waits
+    ],
+)
+def test_the_loop_flushes_and_works_off_retention_between_flushes(retention_done, flush_failures, retentions) -> None:
+    loop = Loop(calls=6, retention_done=retention_done, flush_failures=flush_failures)
+    run(loop, RetentionPolicy(), loop.stop, commit_interval=0.05, retention_every=3600)  # type: ignore[arg-type]
+    assert loop.flushes == 6
+    assert loop.retentions == retentions

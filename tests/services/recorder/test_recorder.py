@@ -1,0 +1,90 @@
+"""``Recorder`` without a bus: messages in, rows out, and what happens when the database is down."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from bevflow_services.recorder.recorder import Recorder
+from bevflow_services.storage import Batch, EventFilter, HistoryDatabase, StorageUnavailable
+from tests.services.gateway.feed import S, T0, occupancy, tracks, violation
+
+MS = 1_000_000
+
+
+@pytest.fixture
+def db(tmp_path: Path):
+    with HistoryDatabase.open(str(tmp_path / "h.db")) as opened:
+        yield opened
+
+
+class FlakyDatabase:
+    """A database whose next ``failures`` writes fail as an unreachable server's would."""
+
+    def __init__(self, db: HistoryDatabase, failures: int) -> None:
+        self.db, self.failures = db, failures
+
+    def write(self, batch: Batch, recorded_ns: int | None = None) -> None:
+        if self.failures > 0:
+            self.failures -= 1
+            raise StorageUnavailable("database: connection refused")
+        self.db.write(batch, recorded_ns)
+
+    def __getattr__(self, name: str):
+        return getattr(self.db, name)
+
+
+def test_a_flush_writes_what_arrived_since_the_last_one(db: HistoryDatabase) -> None:
+    recorder = Recorder(db, clock=lambda: T0 + 99 * S)
+    recorder.on_occupancy(occupancy(T0, 3, gate=1))
+    recorder.on_occupancy(occupancy(T0 + 500 * MS, 5, gate=0))
+    recorder.on_event(violation("v1", T0))
+    for t_ms in (0, 100, 1000, 1900, 2000):
+        recorder.on_tracks(tracks(T0 + t_ms * MS, {1: (t_ms / 1000, 0.0)}))
+    assert recorder.pending() == 1 * 3 + 1 + 3  # occupancy rows (site, gate, shop), alert, positions
+    assert recorder.flush() == 7 and recorder.pending() == 0 and recorder.flush() == 0
+    assert [(p.total, p.zones["gate"]) for p in db.occupancy()] == [(5, 1)]
+    assert ((db.trajectory(1)[0] - T0) // MS).tolist() == [0, 1000, 2000]
+    assert db.events(EventFilter(), 10)[0][0].id == "v1"
+    (recorded,), = db.backend.query("SELECT recorded_ns FROM events")
+    assert recorded == T0 + 99 * S
+
+
+def test_a_failed_flush_keeps_its_rows_for_the_next_one(db: HistoryDatabase) -> None:
+    recorder = Recorder(FlakyDatabase(db, failures=2))  # type: ignore[arg-type]
+    recorder.on_occupancy(occupancy(T0, 3))
+    recorder.on_event(violation("v1", T0))
+    for _ in range(2):
+        with pytest.raises(StorageUnavailable):
+            recorder.flush()
+    recorder.on_occupancy(occupancy(T0 + 200 * MS, 2))  # arrives while the database is down
+    recorder.on_event(violation("v1", T0, end_ns=T0 + S))
+    recorder.flush()
+    assert [p.total for p in db.occupancy()] == [3]
+    assert db.event("v1").end_ns == T0 + S
+    assert recorder.counts["failed_flushes"] == 2 and recorder.counts["flushes"] == 1
+
+
+def test_a_long_outage_drops_the_oldest_samples_but_never_an_alert(db: HistoryDatabase) -> None:
+    recorder = Recorder(FlakyDatabase(db, failures=10), max_pending_rows=6)  # type: ignore[arg-type]
+    for k in range(10):
+        recorder.on_occupancy(occupancy(T0 + k * S, k))
+        recorder.on_event(violation(f"v{k}", T0 + k * S))
+        with pytest.raises(StorageUnavailable):
+            recorder.flush()
+    recorder.flush()
+    assert [p.total for p in db.occupancy()] == [8, 9]  # six rows: the last two seconds
+    assert db.events(EventFilter(), 100)[1] == 10
+    assert recorder.counts["dropped_rows"] == 10 * 3 - 6
+
+
+def test_a_restarted_recorder_resumes_sampling_after_the_stored_positions(db: HistoryDatabase) -> None:
+    first = Recorder(db)
+    first.on_tracks(tracks(T0 + 100 * MS, {1: (0.0, 0.0)}))
+    first.flush()
+    second = Recorder(db)  # killed and started again within the same second
+    second.on_tracks(tracks(T0 + 600 * MS, {1: (1.0, 0.0)}))
+    second.on_tracks(tracks(T0 + 1100 * MS, {1: (2.0, 0.0)}))
+    second.flush()
+    assert ((db.trajectory(1)[0] - T0) // MS).tolist() == [100, 1100]
