@@ -40,7 +40,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     epilog += "\n\n`bevflow serve SERVICE --help` lists a service's own options."
     parser = subparsers.add_parser(
         "serve",
-        help="run one service (router, ingest, detector, projector, tracker, gateway)",
+        help="run one service (router, ingest, detector, projector, tracker, gateway, recorder)",
         description="Run one bevflow service in this process, until Ctrl-C or SIGTERM.",
         epilog=epilog,
         formatter_class=argparse.RawDescriptionHelpFormatter,
