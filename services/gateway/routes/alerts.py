@@ -28,6 +28,13 @@ ActiveParam = Annotated[bool | None, Query(description="true: only ongoing alert
 TypesParam = Annotated[str | None, Query(description=f"comma-separated alert types: {', '.join(EVENT_TYPES)}")]
 
 
+def event_query(site, window, types: frozenset[str] | None, zone: str | None, track: int | None,
+                active: bool | None) -> EventQuery:
+    """The alert filters every alert listing shares, checked against the site."""
+    return EventQuery(types=types, zone=check_zone(site, zone), track=track, active=active,
+                      since_ns=window.since_ns, until_ns=window.until_ns)
+
+
 def _page(state: StateDep, query: EventQuery, limit: int, offset: int) -> Page[AlertMessage]:
     events, total = state.history.events(query, limit, offset)
     return Page[AlertMessage](items=[AlertMessage.from_event(e) for e in events], total=total, limit=limit, offset=offset)
@@ -46,14 +53,7 @@ def violations(
 ) -> Page[AlertMessage]:
     """Pairs of people closer than the social-distance limit for longer than the minimum duration.
     A violation overlapping [since, until] is listed; ``event.min_distance_m`` is the closest approach."""
-    query = EventQuery(
-        types=frozenset({"distance_violation"}),
-        zone=check_zone(site, zone),
-        track=track,
-        active=active,
-        since_ns=window.since_ns,
-        until_ns=window.until_ns,
-    )
+    query = event_query(site, window, frozenset({"distance_violation"}), zone, track, active)
     return _page(state, query, limit, offset)
 
 
@@ -70,12 +70,5 @@ def alerts(
     offset: Offset = 0,
 ) -> Page[AlertMessage]:
     """The same objects ``/ws/alerts`` sends, for filling an alert feed when a page opens."""
-    query = EventQuery(
-        types=split_csv(types, "types", EVENT_TYPES),
-        zone=check_zone(site, zone),
-        track=track,
-        active=active,
-        since_ns=window.since_ns,
-        until_ns=window.until_ns,
-    )
+    query = event_query(site, window, split_csv(types, "types", EVENT_TYPES), zone, track, active)
     return _page(state, query, limit, offset)

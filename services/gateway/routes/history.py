@@ -32,6 +32,7 @@ from bevflow_services.gateway.params import (
     check_zone,
     split_csv,
 )
+from bevflow_services.gateway.routes.alerts import event_query
 from bevflow_services.gateway.routes.occupancy import downsample
 
 router = APIRouter(prefix="/api/history", tags=["history"])
@@ -173,8 +174,7 @@ def event_history(
     fmt: Format = "json",
 ) -> Any:
     """An alert overlapping [since, until] is listed."""
-    query = EventQuery(types=split_csv(types, "types", EVENT_TYPES), zone=check_zone(site, zone), track=track,
-                       active=active, since_ns=window.since_ns, until_ns=window.until_ns)
+    query = event_query(site, window, split_csv(types, "types", EVENT_TYPES), zone, track, active)
     events, total = state.history.events(query, limit, offset)
     rows = [event_row(e) for e in events]
     if fmt == "csv":
