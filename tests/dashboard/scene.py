@@ -63,9 +63,18 @@ def hall() -> Site:
     return parse_site(SITE_YAML)
 
 
-def _inside(rng: np.random.Generator, box: tuple[float, float, float, float], n: int, margin: float = 0.7) -> np.ndarray:
+def _inside(
+    rng: np.random.Generator, box: tuple[float, float, float, float], n: int, clear_of: np.ndarray | None = None
+) -> np.ndarray:
+    """n circle centres in box; with clear_of, none whose circle can pass within a click's reach of those points."""
     x0, y0, x1, y1 = box
-    return np.column_stack([rng.uniform(x0 + margin, x1 - margin, n), rng.uniform(y0 + margin, y1 - margin, n)])
+    margin = 0.7
+    keep: list[np.ndarray] = []
+    while len(keep) < n:
+        point = rng.uniform([x0 + margin, y0 + margin], [x1 - margin, y1 - margin])
+        if clear_of is None or np.linalg.norm(clear_of - point, axis=1).min() > 2 * CIRCLE_RADIUS_M + 0.6:
+            keep.append(point)
+    return np.array(keep)
 
 
 @dataclass(frozen=True)
@@ -105,9 +114,10 @@ def crowd(site: Site) -> Crowd:
     gate A, 15 walking in the open hall; ids 1-2 walk side by side, 3-4 keep close in the entrance."""
     rng = np.random.default_rng(7)
     zones = [np.asarray(z.polygon) for z in site.zones]
+    close_pair = np.array([[2.2, 7.2], [3.3, 7.6]])  # ids 3-4, which the person-panel test clicks on
     milling = np.vstack([
-        [[2.2, 7.2], [3.3, 7.6]],  # ids 3-4
-        _inside(rng, (1, 6, 7, 9), 8),
+        close_pair,
+        _inside(rng, (1, 6, 7, 9), 8, clear_of=close_pair),
         _inside(rng, (20, 10.5, 28, 14.5), 16),
         _inside(rng, (12, 15, 18, 19), 3),
     ])
