@@ -9,8 +9,16 @@ per-camera details); with ``--method all`` the file holds a list of those object
 method, in the order cylinder, bbox-center, nearest-point. A ratio with nothing to divide by (e.g.
 precision when nothing was found) is written as null.
 
+The fused detections are also tracked (``bevflow.evaluation.wildtrack_tracking``: the world
+tracker with real frame times, 0.5 s apart on WILDTRACK) and each object gains the tracking scores
+``MOTA``, ``MOTP``, ``IDF1``, ``IDP``, ``IDR``, ``IDSW``, ``MT``, ``PT``, ``ML``, ``FRAG``,
+``FRAG_ratio`` as top-level keys, ``tracked_MODA`` and the tracked output's detection scores under
+``tracked``. The top-level ``MODA``, ``precision``, ... stay those of the per-frame fused detections.
+
 ``--suite NAME`` runs a simulated suite instead (``bevflow.evaluation.suite``: tracking scores per
-sequence, camera set and method); noise options left out keep the suite's own defaults.
+sequence, camera set and method); noise options left out keep the suite's own defaults. With
+``--detector`` the suite renders every camera's frames and runs the shipped person detector on
+them instead of the noise model (``bevflow.evaluation.rendered``; slow: add ``--frames-scale``).
 """
 
 from __future__ import annotations
@@ -25,6 +33,7 @@ from pathlib import Path
 from bevflow.cylinder import METHODS
 from bevflow.datasets.wildtrack import WildtrackError, load_wildtrack
 from bevflow.evaluation.detection import DetectionEvaluation, evaluate_detection
+from bevflow.evaluation.wildtrack_tracking import TrackingEvaluation, evaluate_tracking
 from bevflow.sim.noise import DetectorNoise
 from bevflow_services.cli import UserError
 from bevflow_services.cli.train_detector import add_detector_arguments, run_detector_evaluation
@@ -38,6 +47,7 @@ examples:
   bevflow evaluate --dataset wildtrack --root /data/Wildtrack --jitter 0.02 --drop 0.1 --method all --json results.json
   bevflow evaluate --dataset wildtrack --root /data/Wildtrack --frames 0:50     (the first 50 annotated frames)
   bevflow evaluate --suite paper --json suite.json     (the paper's Tables 2 and 3 on simulated sequences; add --frames-scale 0.03 for a quick run)
+  bevflow evaluate --suite paper --detector --frames-scale 0.05     (the same on rendered frames through the shipped detector)
 
 --frames takes a Python slice over the annotated frames sorted by frame number, not frame numbers:
   0:50 = the first 50, 150: = from the 151st to the end, ::2 = every other one,
@@ -84,7 +94,9 @@ def run(args: argparse.Namespace) -> int:
     if args.suite is not None:
         return _run_suite(args, methods)
     results = _run_dataset(args, _noise(args, DetectorNoise()), methods)
-    print(format_table(results))
+    print(format_table([r.detection for r in results]))
+    print()
+    print(format_tracking_table(results))
     if args.json is not None:
         _write_json(args.json, [r.as_dict() for r in results] if args.method == "all" else results[0].as_dict())
     return 0
@@ -137,7 +149,7 @@ def parse_frame_slice(text: str) -> slice:
     return slice(start, stop, step[0] if step else None)
 
 
-def _run_dataset(args: argparse.Namespace, noise: DetectorNoise, methods: list[str]) -> list[DetectionEvaluation]:
+def _run_dataset(args: argparse.Namespace, noise: DetectorNoise, methods: list[str]) -> list[TrackingEvaluation]:
     if args.root is None:
         raise UserError(f"--dataset {args.dataset} needs --root DIR (the dataset folder)")
     if not (math.isfinite(args.fusion_distance) and args.fusion_distance > 0):
@@ -150,8 +162,9 @@ def _run_dataset(args: argparse.Namespace, noise: DetectorNoise, methods: list[s
     if not dataset.frames[frames]:
         raise UserError(f"--frames {args.frames} selects none of the {len(dataset.frames)} annotated frames")
     return [
-        evaluate_detection(dataset, method=m, noise=noise, seed=args.seed, frames=frames, fusion_distance_m=args.fusion_distance,
-                           clip_to_image=args.clip_to_image)
+        evaluate_tracking(dataset, detection=evaluate_detection(
+            dataset, method=m, noise=noise, seed=args.seed, frames=frames, fusion_distance_m=args.fusion_distance,
+            clip_to_image=args.clip_to_image))
         for m in methods
     ]
 
@@ -170,10 +183,15 @@ def _run_suite(args: argparse.Namespace, methods: list[str]) -> int:
         raise UserError(f"--frames-scale must be a number > 0, got {args.frames_scale}")
     if args.jobs is not None and args.jobs < 1:
         raise UserError(f"--jobs must be 1 or more, got {args.jobs}")
+    if args.detector and (args.jitter is not None or args.drop is not None or args.false_positives is not None):
+        raise UserError("--suite --detector takes its boxes from the detector: drop --jitter, --drop and --false-positives")
+    if args.model is not None:
+        raise UserError("--suite --detector runs the shipped model; --model applies to --images only")
     noise = _noise(args, suite.DEFAULT_NOISE)
     try:
         result = suite.run_suite(
-            args.suite, frames_scale=scale, noise=noise, seed=args.seed, processes=args.jobs or suite.default_processes()
+            args.suite, frames_scale=scale, noise=noise, seed=args.seed, processes=args.jobs or suite.default_processes(),
+            detector=args.detector,
         )
     except ValueError as exc:
         raise UserError(str(exc)) from None
@@ -209,6 +227,25 @@ def format_table(results: list[DetectionEvaluation]) -> str:
                 f"{c.camera_id:<10} {c.boxes:>6} {c.detections:>6} {c.dropped:>5} {c.truncated:>5} {c.false_positives:>4} {c.clipped:>5} "
                 f"{c.unplaced:>5} {c.outside_area:>5} {_num(a.precision)} {_num(a.recall)} {_num(a.APE)}"
             )
+    return "\n".join(lines)
+
+
+def format_tracking_table(results: list[TrackingEvaluation]) -> str:
+    """One row per method: the tracked output's scores next to the per-frame detections' MODA."""
+    first = results[0]
+    c = first.tracker
+    lines = [
+        f"tracked ({c.activate_hits} hits to confirm, {c.max_misses} misses to drop, "
+        f"frame f at f x {first.seconds_per_frame_number:g} s; 'det MODA' = the per-frame fused detections):",
+        f"{'method':<14} {'MOTA':>6} {'IDF1':>6} {'IDSW':>5} {'MT':>4} {'PT':>4} {'ML':>4} {'FRAG':>5} "
+        f"{'MODA':>6} {'det MODA':>8} {'prec':>6} {'recall':>6} {'APE m':>6}",
+    ]
+    for r in results:
+        s = r.scores
+        lines.append(
+            f"{r.detection.method:<14} {_num(s.MOTA)} {_num(s.IDF1)} {s.IDSW:>5} {s.MT:>4} {s.PT:>4} {s.ML:>4} {s.FRAG:>5} "
+            f"{_num(s.MODA)} {_num(r.detection.scores.MODA):>8} {_num(s.precision)} {_num(s.recall)} {_num(s.APE)}"
+        )
     return "\n".join(lines)
 
 

@@ -23,6 +23,9 @@ Views 0..6 are CVLab1..4, IDIAP1..3. Checked on the 200 public frames: projectin
 ground-truth feet through the camera of that view lands within a median 3–16 px of the bottom
 centre of the person's box, in every view.
 
+Frame numbers count tenths of a second: the 200 public annotated frames 0, 5, …, 995 are 0.5 s
+apart (2 per second), so a walking person moves about 0.7 m between two of them.
+
 The annotated area is the extent of the grid. Only estimates inside it are scored, as is
 standard for WILDTRACK: people outside it are not annotated, so detections there are not errors.
 """
@@ -52,6 +55,7 @@ IMAGE_SIZE = (1920, 1080)
 GRID_SHAPE = (480, 1440)  # (nx, ny): positionID = ix + 480 · iy
 GRID_ORIGIN_M = (-3.0, -9.0)
 GRID_STEP_M = 0.025
+SECONDS_PER_FRAME_NUMBER = 0.1  # the frames were annotated every 5th of a 10-per-second sequence: 0.5 s apart
 _FRAME_FILE = re.compile(r"^(\d+)\.json$")
 
 
@@ -122,6 +126,8 @@ class WildtrackDataset:
     """The annotation ``viewNum`` of each camera (its index in ``CAMERA_NAMES``)."""
     frames: tuple[WildtrackFrame, ...]
     area: FloorArea = ANNOTATED_AREA
+    seconds_per_frame_number: float = SECONDS_PER_FRAME_NUMBER
+    """Capture time of frame f is f × this (seconds); what a tracker needs to predict motion."""
 
 
 def load_wildtrack(root: Path | str) -> WildtrackDataset:

@@ -12,8 +12,11 @@ ones: they bound the whole person), which no detector can report. ``clip_to_imag
 every noisy box to the image, as a detector's would be, and drops boxes left with no area; it is
 off by default so the boxes are the dataset's own.
 
-Estimates outside the annotated area are dropped before scoring (after fusion, so the area does
-not change what merges): nobody outside it is annotated, so they are neither right nor wrong.
+Estimates outside the annotated area that match nobody are dropped before scoring (after fusion,
+so the area does not change what merges): nobody outside it is annotated, so they are neither
+right nor wrong. An estimate just outside that matches a person just inside (within
+``threshold_m``) is kept and counts as found: a person 0.1 m inside the edge placed 0.2 m outside
+it has been found, and dropping the estimate would score them as missed (``scored_estimates``).
 Each camera is also scored alone (its own cylinders in the area against the people it sees, weak
 fits left out as fusion leaves them out when alone), which separates a camera's calibration or
 projection error from what fusion does.
@@ -29,7 +32,7 @@ same noisy boxes.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from typing import Protocol
 
 import numpy as np
@@ -40,6 +43,7 @@ from bevflow.cylinder import CylinderGrid, fit_cylinders
 from bevflow.detections import Boxes, Cylinders
 from bevflow.fusion import PositionNoise, fuse_cylinders
 from bevflow.metrics.detection import DetectionScores, score_detections
+from bevflow.metrics.matching import match_positions
 from bevflow.sim.noise import DetectorNoise, NoisyBoxes, apply_detector_noise, view_rng
 
 FloatArray = NDArray[np.float64]
@@ -109,8 +113,11 @@ class DetectionEvaluation:
     clip_to_image: bool
     frame_numbers: tuple[int, ...]
     scores: DetectionScores
-    views_per_estimate: float  # mean number of cameras merged into a fused estimate in the area
+    views_per_estimate: float  # mean number of cameras merged into a scored fused estimate
     per_camera: tuple[CameraCounts, ...]
+    fused: tuple[Cylinders, ...] = field(default=(), repr=False, compare=False)
+    """Every evaluated frame's fused cylinders, all of them (inside the area or not): what a
+    tracker downstream consumes."""
 
     def as_dict(self) -> dict:
         """JSON-ready; the headline numbers (MODA, MODP, precision, recall, F1, APE, method,
@@ -169,6 +176,18 @@ def clip_boxes_to_image(noisy: NoisyBoxes, image_size: tuple[int, int]) -> tuple
     return NoisyBoxes(boxes=boxes, source=noisy.source[keep], truncated=noisy.truncated[keep]), changed
 
 
+def scored_estimates(area: Area, gt_xy: FloatArray, est_xy: FloatArray, threshold_m: float) -> NDArray[np.bool_]:
+    """(N,) which estimates of one frame are scored: those inside ``area`` and those outside it
+    that a one-to-one match of every estimate with the ground truth pairs with a person. Scoring
+    just these finds exactly as many people as scoring all estimates would, without counting
+    the unannotated surroundings as false positives."""
+    keep = area.contains(est_xy)
+    if len(gt_xy) and not keep.all():
+        _, matched, _ = match_positions(gt_xy, est_xy, threshold_m)
+        keep[matched] = True
+    return keep
+
+
 def evaluate_detection(
     dataset: AnnotatedDataset,
     method: str = "cylinder",
@@ -188,6 +207,7 @@ def evaluate_detection(
     gt: list[FloatArray] = []
     fused_xy: list[FloatArray] = []
     views_merged: list[FloatArray] = []
+    fused_frames: list[Cylinders] = []
     alone_gt: list[list[FloatArray]] = [[] for _ in cameras]
     alone_est: list[list[FloatArray]] = [[] for _ in cameras]
     counts = np.zeros((n_cam, 9), dtype=np.int64)  # the CameraCounts fields from boxes to outside_area
@@ -214,13 +234,15 @@ def evaluate_detection(
             ]
             seen = np.isin(frame.person_ids, view.person_ids)
             alone_gt[i].append(frame.feet_xy[seen])
-            alone_est[i].append(cylinders.xy[inside & ~weak])
+            strong_xy = cylinders.xy[placed & ~weak]
+            alone_est[i].append(strong_xy[scored_estimates(dataset.area, frame.feet_xy[seen], strong_xy, threshold_m)])
             per_camera.append(cylinders[placed])
         fusion = fuse_cylinders(Cylinders.merge(per_camera), cameras, distance_m=fusion_distance_m, noise=position_noise)
-        inside = dataset.area.contains(fusion.fused.xy)
+        scored = scored_estimates(dataset.area, frame.feet_xy, fusion.fused.xy, threshold_m)
         gt.append(frame.feet_xy)
-        fused_xy.append(fusion.fused.xy[inside])
-        views_merged.append(np.asarray(fusion.n_views, dtype=np.float64)[inside])
+        fused_xy.append(fusion.fused.xy[scored])
+        views_merged.append(np.asarray(fusion.n_views, dtype=np.float64)[scored])
+        fused_frames.append(fusion.fused)
     merged = np.concatenate(views_merged) if views_merged else np.zeros(0)
     return DetectionEvaluation(
         method=method,
@@ -241,4 +263,5 @@ def evaluate_detection(
             )
             for i in range(n_cam)
         ),
+        fused=tuple(fused_frames),
     )

@@ -17,7 +17,9 @@ nearest-point), the whole pipeline runs as it runs live:
    with the generator ``view_rng(seed, frame, camera)`` where ``camera`` is the camera's index in
    the preset, so a camera gets the same noisy boxes alone and in a pair, and every method sees
    the same boxes. The boxes are passed as their own visible extent (``visible=``): the truncation
-   is the simulator's, not the side-view rule of the noise model.
+   is the simulator's, not the side-view rule of the noise model. With ``detector=True``
+   (``bevflow evaluate --suite paper --detector``) the boxes come instead from the shipped person
+   detector run on rendered frames (``bevflow.evaluation.rendered``), and the noise model is off.
 3. **Project** every box to the floor with the method (``bevflow.cylinder.fit_cylinders``) and
    pass the result through the projector's wire message (``CameraCylinders``), as live.
 4. **Fuse, track and analyse** with ``bevflow.live.site_tracker.SiteTracker`` over a site that
@@ -26,11 +28,18 @@ nearest-point), the whole pipeline runs as it runs live:
 
 What is scored, and why:
 
-- Ground truth: every person whose feet lie inside the camera set's monitored area (the union of
-  its cameras' monitored circles), as ``GroundTruthTracks`` counts tracks: someone who leaves that
-  area and comes back is a new ground-truth track, as in the paper. So a camera alone has its own
-  ground truth, over its own circle. People hidden from every camera stay in the ground truth;
-  ``unseen`` reports their share (a ceiling on recall).
+- Ground truth: in each frame, every person whose feet lie inside the camera set's monitored area
+  (the union of its cameras' monitored circles) and who is in sight of at least one camera of the
+  set: some part of the body visible, unhidden by pillars, shelves and other people
+  (``CameraView.in_sight_ids``). That is what annotators of the set's videos could mark, and the
+  usual MOT practice (a person wholly hidden from every camera is not annotated in that frame).
+  Tracks are counted as ``GroundTruthTracks`` counts them: someone who leaves the area and comes
+  back is a new ground-truth track, as in the paper; someone hidden for a while inside the area
+  keeps their track id, so losing them costs an identity switch or a fragmentation. A camera alone
+  has its own ground truth, over its own circle. ``hidden`` reports the share of person-frames
+  inside the area left out because no camera of the set could see them at all; ``unseen`` the
+  share of the ground truth that no camera of the set boxed (too hidden for a box: a ceiling on
+  recall).
 - Hypotheses: the tracks ``SiteStep.table`` reports (confirmed tracks, matched this frame or
   coasting one frame), restricted to the same monitored area. Nobody outside the area is
   annotated, so an estimate there is neither right nor wrong (the rule of WILDTRACK's area too);
@@ -59,7 +68,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bevflow.cylinder import METHODS, fit_cylinders
-from bevflow.detections import Cylinders
+from bevflow.detections import Boxes, Cylinders
+from bevflow.evaluation.rendered import RenderedDetector, attribute
 from bevflow.live.site_tracker import SiteTracker
 from bevflow.metrics.tracking import TrackingScores, score_tracking
 from bevflow.schemas import CameraCylinders
@@ -81,13 +91,16 @@ _EPOCH_NS = 1_700_000_000 * 1_000_000_000  # a plausible capture clock; the trac
 @dataclass(frozen=True, eq=False)
 class SimulatedSequence:
     """A preset run once: the capture time of each frame (ns), everyone on the floor (visit ids
-    and feet), and what every camera of the preset saw (``views[frame][camera]``)."""
+    and feet), and what every camera of the preset saw (``views[frame][camera]``). ``detected``
+    (``[frame][camera]``), when present, holds the shipped detector's boxes on rendered frames,
+    which then replace the noise model (``bevflow.evaluation.rendered``)."""
 
     preset: Preset
     time_ns: list[int]
     person_ids: list[IntArray]
     feet_xy: list[FloatArray]
     views: list[list[CameraView]]
+    detected: list[list[Boxes]] | None = None
 
     def __len__(self) -> int:
         return len(self.time_ns)
@@ -103,10 +116,11 @@ class SuiteRow:
     scores: TrackingScores
     box_ape: float = math.nan
     unseen: float = math.nan
+    hidden: float = math.nan
 
     def record(self) -> dict:
         """The JSON record: the paper's columns (MT, PT, ML as fractions of the ground-truth
-        tracks), IDF1, ``box_APE`` and ``unseen`` (see the module docstring), and the counts
+        tracks), IDF1, ``box_APE``, ``unseen`` and ``hidden`` (see the module docstring), and the counts
         behind them."""
         s = self.scores
         return {
@@ -126,6 +140,7 @@ class SuiteRow:
             "IDF1": s.IDF1,
             "box_APE": self.box_ape,
             "unseen": self.unseen,
+            "hidden": self.hidden,
             "IDSW": s.IDSW,
             "MOTP": s.MOTP,
             "gt_tracks": s.n_gt_ids,
@@ -145,11 +160,13 @@ class SuiteResult:
     noise: DetectorNoise
     seed: int
     frames_scale: float
+    detector: bool = False
 
     def as_dict(self) -> dict:
         return {
             "suite": self.suite,
             "frames_scale": self.frames_scale,
+            "detector": self.detector,
             "seed": self.seed,
             "noise": asdict(self.noise),
             "threshold_m": THRESHOLD_M,
@@ -172,20 +189,24 @@ def camera_sets(preset: Preset) -> list[tuple[str, ...]]:
     return [ids] + ([(c,) for c in ids] if len(ids) > 1 else [])
 
 
-def simulate(preset: Preset, detection_margin_m: float = 0.0) -> SimulatedSequence:
-    """Run the preset's scene and render every camera's view of every frame (the slow part).
+def simulate(preset: Preset, detection_margin_m: float = 0.0, detector: bool = False) -> SimulatedSequence:
+    """Run the preset's scene and compute every camera's view of every frame (the slow part).
     A camera reports the people inside its monitored radius (the simulator's rule), or up to
-    ``detection_margin_m`` beyond it."""
+    ``detection_margin_m`` beyond it. ``detector``: also render every camera's frames and run the
+    shipped detector on them (``bevflow.evaluation.rendered``; much slower)."""
     site = preset.site
     radii = [None if c.monitored_radius_m is None else c.monitored_radius_m + detection_margin_m for c in site.cameras]
     rig = CameraRig([site.camera(c.id) for c in site.cameras], radii, preset.obstacles())
-    times, ids, feet, views = [], [], [], []
+    rendered = RenderedDetector(site, preset.scene) if detector else None
+    times, ids, feet, views, detected = [], [], [], [], []
     for frame in Scene(preset.scene).run():
         times.append(_EPOCH_NS + round(frame.time_s * 1e9))
         ids.append(frame.person_ids)
         feet.append(frame.feet_xy)
         views.append(rig.observe(frame))
-    return SimulatedSequence(preset, times, ids, feet, views)
+        if rendered is not None:
+            detected.append(rendered.boxes(frame))
+    return SimulatedSequence(preset, times, ids, feet, views, detected if rendered is not None else None)
 
 
 @dataclass(frozen=True, eq=False)
@@ -202,7 +223,8 @@ class Detections:
 
 def detect(sequence: SimulatedSequence, noise: DetectorNoise, seed: int, methods: Sequence[str]) -> dict[str, Detections]:
     """Noisy boxes → cylinders for each method. The noise of frame k, camera c is drawn from
-    ``view_rng(seed, k, c)``, once, so every method and camera set sees the same boxes."""
+    ``view_rng(seed, k, c)``, once, so every method and camera set sees the same boxes. A
+    sequence with ``detected`` boxes uses those instead, and ``noise`` does not apply."""
     site = sequence.preset.site
     cameras = [site.camera(c) for c in site.camera_ids]
     cylinders: dict[str, list[list[Cylinders]]] = {m: [] for m in methods}
@@ -212,11 +234,16 @@ def detect(sequence: SimulatedSequence, noise: DetectorNoise, seed: int, methods
         for m in methods:
             cylinders[m].append([])
         for c, (camera, view) in enumerate(zip(cameras, views, strict=True)):
-            noisy = apply_detector_noise(view.boxes, noise, view_rng(seed, k, c), camera.image_size, visible=view.boxes.xyxy)
-            real = noisy.source >= 0
-            truths[c].append(view.feet_xy[noisy.source[real]])
+            if sequence.detected is not None:
+                boxes = sequence.detected[k][c]
+                source = attribute(boxes, view)
+            else:
+                noisy = apply_detector_noise(view.boxes, noise, view_rng(seed, k, c), camera.image_size, visible=view.boxes.xyxy)
+                boxes, source = noisy.boxes, noisy.source
+            real = source >= 0
+            truths[c].append(view.feet_xy[source[real]])
             for m in methods:
-                fit = fit_cylinders(camera, noisy.boxes, m, camera_index=c)  # type: ignore[arg-type]
+                fit = fit_cylinders(camera, boxes, m, camera_index=c)  # type: ignore[arg-type]
                 # Through the projector's wire message, as live: unplaceable rows are dropped there.
                 wire = CameraCylinders.from_cylinders(site.camera_ids[c], k, sequence.time_ns[k], fit)
                 cylinders[m][k].append(wire.to_cylinders(c))
@@ -227,27 +254,49 @@ def detect(sequence: SimulatedSequence, noise: DetectorNoise, seed: int, methods
     }
 
 
-def ground_truth(sequence: SimulatedSequence, rig: CameraRig) -> list[Frame]:
-    """Per frame, the ground-truth (track ids, feet) inside ``rig``'s monitored area."""
+def ground_truth(
+    sequence: SimulatedSequence, rig: CameraRig, camera_indices: Sequence[int] | None = None
+) -> list[Frame]:
+    """Per frame, the ground-truth (track ids, feet): the people inside ``rig``'s monitored area
+    in sight of at least one of the cameras ``camera_indices`` (indices in the preset; default:
+    every camera of the sequence). Track ids follow the area alone (see ``GroundTruthTracks``)."""
     tracks = GroundTruthTracks(rig)
     out = []
-    for ids, feet in zip(sequence.person_ids, sequence.feet_xy, strict=True):
+    for ids, feet, views in zip(sequence.person_ids, sequence.feet_xy, sequence.views, strict=True):
         gt = tracks.update(_Frame(ids, feet))  # type: ignore[arg-type]
-        out.append((gt.track_ids, gt.feet_xy))
+        keep = np.isin(gt.person_ids, _in_sight(views, camera_indices))
+        out.append((gt.track_ids[keep], gt.feet_xy[keep]))
     return out
 
 
+def hidden_share(sequence: SimulatedSequence, rig: CameraRig, camera_indices: Sequence[int]) -> float:
+    """The share of person-frames inside ``rig``'s area that no camera of ``camera_indices`` can
+    see at all (left out of the ground truth)."""
+    total = hidden = 0
+    for ids, feet, views in zip(sequence.person_ids, sequence.feet_xy, sequence.views, strict=True):
+        inside = ids[rig.monitored(feet).any(axis=1)] if len(ids) else ids
+        total += len(inside)
+        hidden += int(np.count_nonzero(~np.isin(inside, _in_sight(views, camera_indices))))
+    return hidden / total if total else math.nan
+
+
 def unseen_share(sequence: SimulatedSequence, rig: CameraRig, camera_indices: Sequence[int]) -> float:
-    """The share of ground-truth person-frames (inside ``rig``'s area) that none of the cameras
-    reports at all, before any detector noise: hidden behind occluders or other people. No
-    tracker can find them, so recall cannot exceed 1 minus this."""
+    """The share of ground-truth person-frames (inside ``rig``'s area, in sight of a camera) that
+    none of the cameras boxes, before any detector noise: too hidden behind occluders or other
+    people for a box. No tracker can find them, so recall cannot exceed 1 minus this."""
     total = unseen = 0
     for ids, feet, views in zip(sequence.person_ids, sequence.feet_xy, sequence.views, strict=True):
         inside = ids[rig.monitored(feet).any(axis=1)] if len(ids) else ids
+        inside = inside[np.isin(inside, _in_sight(views, camera_indices))]
         seen = np.concatenate([views[c].person_ids for c in camera_indices])
         total += len(inside)
         unseen += int(np.count_nonzero(~np.isin(inside, seen)))
     return unseen / total if total else math.nan
+
+
+def _in_sight(views: Sequence[CameraView], camera_indices: Sequence[int] | None) -> IntArray:
+    chosen = range(len(views)) if camera_indices is None else camera_indices
+    return np.concatenate([np.zeros(0, np.int64), *(views[c].in_sight_ids for c in chosen)])  # type: ignore[misc]
 
 
 def track(sequence: SimulatedSequence, camera_ids: Sequence[str], cylinders: list[list[Cylinders]]) -> list[Frame]:
@@ -274,13 +323,14 @@ def evaluate_sequence(
     for camera_ids in camera_sets(preset):
         rig = _subset_rig(preset, camera_ids)
         indices = [preset.site.camera_index(c) for c in camera_ids]
-        gt = ground_truth(sequence, rig)
+        gt = ground_truth(sequence, rig, indices)
         unseen = unseen_share(sequence, rig, indices)
+        hidden = hidden_share(sequence, rig, indices)
         for method in methods:
             found = detections[method]
             hyp = [_inside(rig, ids, xy) for ids, xy in track(sequence, camera_ids, found.cylinders)]
             scores = score_tracking(gt, hyp, THRESHOLD_M)
-            rows.append(SuiteRow(preset.sequence or 0, camera_ids, method, scores, _box_ape(found, rig, indices), unseen))
+            rows.append(SuiteRow(preset.sequence or 0, camera_ids, method, scores, _box_ape(found, rig, indices), unseen, hidden))
     return rows
 
 
@@ -292,9 +342,12 @@ def run_suite(
     methods: Sequence[str] = METHODS,
     sequences: Iterable[int] | None = None,
     processes: int = 1,
+    detector: bool = False,
 ) -> SuiteResult:
     """Run a suite (only ``"paper"`` exists): rows in the order sequence, camera set, method.
-    ``processes`` > 1 runs presets in parallel (each process simulates whole presets)."""
+    ``processes`` > 1 runs presets in parallel (each process simulates whole presets).
+    ``detector``: boxes from the shipped detector on rendered frames instead of the noise model
+    (``noise`` is then unused; see ``bevflow.evaluation.rendered``)."""
     if name not in SUITES:
         raise ValueError(f"unknown suite {name!r}; choose one of: {', '.join(SUITES)}")
     if seed < 0:
@@ -303,7 +356,7 @@ def run_suite(
     if unknown or not methods:
         raise ValueError(f"methods must be among {', '.join(METHODS)}, got {list(methods)}")
     presets = paper_presets(frames_scale, sequences)
-    jobs = [(p, noise, seed, tuple(methods)) for p in presets]
+    jobs = [(p, noise, seed, tuple(methods), detector) for p in presets]
     if processes > 1 and len(jobs) > 1:
         # Longest presets first, so the last one to finish is short.
         order = sorted(range(len(jobs)), key=lambda k: -_cost(presets[k]))
@@ -313,7 +366,7 @@ def run_suite(
     else:
         per_preset = [_evaluate_preset(job) for job in jobs]
     rows = tuple(row for rows in per_preset for row in rows)
-    return SuiteResult(name, rows, noise, seed, frames_scale)
+    return SuiteResult(name, rows, noise, seed, frames_scale, detector)
 
 
 def default_processes() -> int:
@@ -321,9 +374,9 @@ def default_processes() -> int:
     return max(1, min(len(TABLE1), os.cpu_count() or 1))
 
 
-def _evaluate_preset(job: tuple[Preset, DetectorNoise, int, tuple[str, ...]]) -> list[SuiteRow]:
-    preset, noise, seed, methods = job
-    return evaluate_sequence(simulate(preset), noise, seed, methods)
+def _evaluate_preset(job: tuple[Preset, DetectorNoise, int, tuple[str, ...], bool]) -> list[SuiteRow]:
+    preset, noise, seed, methods, detector = job
+    return evaluate_sequence(simulate(preset, detector=detector), noise, seed, methods)
 
 
 def _cost(preset: Preset) -> float:

@@ -1,8 +1,10 @@
 """The suite's results as plain-text tables in the paper's layout (its Tables 2 and 3).
 
 Table 2 has one row per sequence and camera set, for the cylinder method: MOTA, MT, PT, ML (as
-fractions of the ground-truth tracks), FRAG, FRAG ratio, P, R, F1 and APE, then IDF1 and the
-share of ground truth no camera of the set could see (``unseen``, a ceiling on recall).
+fractions of the ground-truth tracks), FRAG, FRAG ratio, P, R, F1 and APE, then IDF1, the share
+of ground truth no camera of the set boxed (``unseen``, a ceiling on recall) and the share of
+person-frames in the area left out of the ground truth because no camera could see them at all
+(``hidden``).
 Table 3 compares the projection methods on P, R, F1 and APE (tracking APE: matched within the
 0.5 m threshold, so it never exceeds it), and gives each method's mean floor error per detected
 box (``box APE``, before fusion and tracking, not capped by any threshold) with the ratio of
@@ -26,6 +28,8 @@ def format_suite(result: SuiteResult) -> str:
         f"suite {result.suite}: frames x{result.frames_scale:g}, noise: jitter {n.jitter:g}, drop {n.drop:g}, "
         f"false positives {n.false_positives:g}, truncation {'on' if n.truncation else 'off'}, seed {result.seed}"
     )
+    if result.detector:
+        head = f"suite {result.suite}: frames x{result.frames_scale:g}, boxes: the shipped detector on rendered frames"
     return "\n\n".join([head, format_table2(result.rows), format_table3(result.rows)])
 
 
@@ -33,7 +37,7 @@ def format_table2(rows: Sequence[SuiteRow], method: str = "cylinder") -> str:
     """Tracking scores of one method (the paper's Table 2 uses the cylinder)."""
     header = (
         f"{'seq':>3} {'cameras':<11} {'MOTA':>6} {'MT':>5} {'PT':>5} {'ML':>5} {'FRAG':>5} {'FRAGr':>6} "
-        f"{'P':>6} {'R':>6} {'F1':>6} {'APE m':>6} {'IDF1':>6} {'unseen':>6}"
+        f"{'P':>6} {'R':>6} {'F1':>6} {'APE m':>6} {'IDF1':>6} {'unseen':>6} {'hidden':>6}"
     )
     lines = [f"Table 2: tracking ({method})", header]
     for row in rows:
@@ -43,7 +47,7 @@ def format_table2(rows: Sequence[SuiteRow], method: str = "cylinder") -> str:
         lines.append(
             f"{row.seq:>3} {_cameras(row):<11} {_n(r['MOTA'])} {_n(r['MT'], 5, 2)} {_n(r['PT'], 5, 2)} {_n(r['ML'], 5, 2)} "
             f"{r['FRAG']:>5} {_n(r['FRAG_ratio'], 6, 1)} {_n(r['P'])} {_n(r['R'])} {_n(r['F1'])} {_n(r['APE'])} "
-            f"{_n(r['IDF1'])} {_n(r['unseen'])}"
+            f"{_n(r['IDF1'])} {_n(r['unseen'])} {_n(r['hidden'])}"
         )
     return "\n".join(lines)
 

@@ -56,7 +56,11 @@ class CameraView:
     """The people one camera sees in one frame, row-aligned: their ``boxes`` (bounding boxes of
     the visible silhouette, pixels), ``person_ids``, the ``visible_fraction`` of their camera-facing
     surface, whether the feet side is hidden (``lower_occluded``: under half of the surface below
-    the knees is visible), and their ground-truth ``feet_xy`` on the floor."""
+    the knees is visible), and their ground-truth ``feet_xy`` on the floor.
+
+    ``in_sight_ids`` (not row-aligned) lists everyone inside the monitored radius with any part of
+    the body in view, boxed or not: a superset of ``person_ids`` that also holds people too hidden
+    to be boxed. It is who an annotator of this camera's video would mark (default: ``person_ids``)."""
 
     camera_index: int
     boxes: Boxes
@@ -64,6 +68,11 @@ class CameraView:
     visible_fraction: FloatArray
     lower_occluded: BoolArray
     feet_xy: FloatArray
+    in_sight_ids: IntArray | None = None
+
+    def __post_init__(self) -> None:
+        if self.in_sight_ids is None:
+            object.__setattr__(self, "in_sight_ids", self.person_ids)
 
     def __len__(self) -> int:
         return len(self.person_ids)
@@ -169,6 +178,7 @@ class CameraRig:
             visible_fraction=fraction[keep],
             lower_occluded=lower_fraction[keep] < 0.5,
             feet_xy=frame.feet_xy[rows],
+            in_sight_ids=frame.person_ids[near[candidate & visible.any(1)]],
         )
 
     def _hidden_by_people(

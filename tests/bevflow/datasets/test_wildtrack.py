@@ -249,3 +249,9 @@ def test_real_wildtrack_feet_project_near_box_bottoms() -> None:
             errors.extend(np.linalg.norm(uv - bottom, axis=1))
         # measured medians are 3-16 px; a wrong unit or camera order gives hundreds of pixels
         assert np.median(errors) < 25.0, (ds.camera_ids[i], np.median(errors))
+
+
+def test_frames_carry_their_capture_clock(fake_root: Path) -> None:
+    ds = load_wildtrack(fake_root)
+    # annotated frame numbers 0, 5, 10 are 0.5 s apart
+    assert [f.frame * ds.seconds_per_frame_number for f in ds.frames] == pytest.approx([0.0, 0.5, 1.0])

@@ -8,7 +8,7 @@ import pytest
 
 from bevflow.datasets.wildtrack import FloorArea, WildtrackDataset, load_wildtrack
 from bevflow.detections import Boxes
-from bevflow.evaluation.detection import clip_boxes_to_image, evaluate_detection, noisy_detections
+from bevflow.evaluation.detection import clip_boxes_to_image, evaluate_detection, noisy_detections, scored_estimates
 from bevflow.sim.noise import DetectorNoise, NoisyBoxes
 from tests.bevflow.datasets.test_wildtrack import write_fake_wildtrack
 
@@ -74,13 +74,55 @@ def test_a_slice_scores_exactly_its_frames_of_the_full_run(dataset: WildtrackDat
     ]
 
 
-def test_estimates_outside_the_annotated_area_are_not_scored(dataset: WildtrackDataset) -> None:
-    # person 8 stands at x = 3.0 m: an area ending at x = 2.5 m keeps their ground truth (always
-    # scored) but discards their estimate, so each frame gains one miss and no false positive
-    narrow = dataclasses.replace(dataset, area=FloorArea(-3.0, 2.5, -9.0, 27.0))
-    s = evaluate_detection(narrow, noise=PERFECT).scores
-    assert (s.tp, s.fp, s.fn) == (6, 0, 3)
-    assert [c.outside_area for c in evaluate_detection(narrow, noise=PERFECT).per_camera] == [3, 3]
+def _without_person(dataset: WildtrackDataset, person: int) -> WildtrackDataset:
+    """The same boxes, but ``person`` left out of the ground truth (as if standing unannotated)."""
+    frames = tuple(
+        dataclasses.replace(f, person_ids=f.person_ids[f.person_ids != person], feet_xy=f.feet_xy[f.person_ids != person])
+        for f in dataset.frames
+    )
+    return dataclasses.replace(dataset, frames=frames)
+
+
+NARROW = FloorArea(-3.0, 2.5, -9.0, 27.0)  # ends 0.5 m before person 8 (x = 3.0 m)
+
+
+@pytest.mark.parametrize(
+    ("area", "annotated", "expected"),
+    [
+        (None, True, (9, 0, 0)),
+        # an estimate just outside the area that matches a person is a person found
+        (NARROW, True, (9, 0, 0)),
+        # an unannotated person outside the area is neither right nor wrong
+        (NARROW, False, (6, 0, 0)),
+        # inside the area, an estimate of nobody annotated is a false positive
+        (None, False, (6, 3, 0)),
+    ],
+)
+def test_only_estimates_inside_the_area_or_matching_a_person_are_scored(
+    dataset: WildtrackDataset, area: FloorArea | None, annotated: bool, expected: tuple[int, int, int]
+) -> None:
+    case = dataset if annotated else _without_person(dataset, 8)
+    if area is not None:
+        case = dataclasses.replace(case, area=area)
+    result = evaluate_detection(case, noise=PERFECT)
+    s = result.scores
+    assert (s.tp, s.fp, s.fn) == expected
+    assert [c.outside_area for c in result.per_camera] == ([3, 3] if area is NARROW else [0, 0])
+
+
+@pytest.mark.parametrize(
+    ("gt", "est", "expected"),
+    [
+        ([[0.0, 0.0]], [[-0.3, 0.0], [1.0, 0.0]], [True, True]),  # outside, 0.3 m from a person
+        ([[0.0, 0.0]], [[-0.6, 0.0]], [False]),  # outside, beyond the 0.5 m threshold
+        ([[0.0, 0.0]], [[0.1, 0.0], [-0.2, 0.0]], [True, False]),  # the person is taken by the nearer one
+        ([], [[-0.1, 0.0], [0.5, 0.0]], [False, True]),
+    ],
+)
+def test_scored_estimates_keep_the_area_and_outside_matches(gt: list, est: list, expected: list[bool]) -> None:
+    area = FloorArea(0.0, 2.0, -1.0, 1.0)
+    keep = scored_estimates(area, np.array(gt).reshape(-1, 2), np.array(est), 0.5)
+    assert keep.tolist() == expected
 
 
 def test_as_dict_puts_the_headline_numbers_on_top(dataset: WildtrackDataset) -> None:

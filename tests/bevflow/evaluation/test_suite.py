@@ -16,6 +16,7 @@ from bevflow.evaluation.suite import (
     camera_sets,
     detect,
     ground_truth,
+    hidden_share,
     paper_presets,
     run_suite,
     simulate,
@@ -97,13 +98,44 @@ def test_ground_truth_counts_a_return_to_the_area_as_a_new_track() -> None:
     assert gt[1][1].tolist() == [[9.0, 9.0]]
 
 
-def test_unseen_share_counts_people_inside_that_no_camera_reports() -> None:
+def boxed_first_only(view: CameraView, in_sight: list[int]) -> CameraView:
+    """``view`` with only its first person boxed, and ``in_sight`` the people the camera can see."""
+    return CameraView(0, view.boxes[:1], view.person_ids[:1], view.visible_fraction[:1], view.lower_occluded[:1],
+                      view.feet_xy[:1], in_sight_ids=np.asarray(in_sight, np.int64))  # fmt: skip
+
+
+def test_unseen_share_counts_people_in_sight_that_no_camera_boxes() -> None:
     seq = hand_made([[(8.0, 8.0), (9.0, 9.0)], [(8.0, 8.0)]], [[1, 2], [1]])
-    # Hide person 2 in frame 0 from the camera: 1 of the 3 person-frames inside is unseen.
-    view = seq.views[0][0]
-    hidden = CameraView(0, view.boxes[:1], view.person_ids[:1], view.visible_fraction[:1], view.lower_occluded[:1], view.feet_xy[:1])
-    seq = replace(seq, views=[[hidden], seq.views[1]])
+    # Person 2 is in sight in frame 0 but too hidden for a box: 1 of the 3 person-frames is unseen.
+    seq = replace(seq, views=[[boxed_first_only(seq.views[0][0], [1, 2])], seq.views[1]])
     assert unseen_share(seq, seq6_rig(), [0]) == pytest.approx(1 / 3)
+    assert hidden_share(seq, seq6_rig(), [0]) == 0.0
+
+
+@pytest.mark.parametrize(
+    ("in_sight", "gt_ids", "hidden"),
+    [
+        ([1, 2], [[1, 2], [1, 2], [1, 2]], 0.0),  # partly hidden (no box) but in sight: counted
+        ([1], [[1, 2], [1], [1, 2]], 1 / 6),  # wholly hidden in frame 1: left out, keeps its track id
+    ],
+)
+def test_ground_truth_holds_only_people_in_sight_of_a_camera(in_sight: list[int], gt_ids: list[list[int]], hidden: float) -> None:
+    seq = hand_made([[(8.0, 8.0), (9.0, 9.0)]] * 3, [[1, 2]] * 3)
+    seq = replace(seq, views=[seq.views[0], [boxed_first_only(seq.views[1][0], in_sight)], seq.views[2]])
+    assert [ids.tolist() for ids, _ in ground_truth(seq, seq6_rig(), [0])] == gt_ids
+    assert hidden_share(seq, seq6_rig(), [0]) == pytest.approx(hidden)
+    assert unseen_share(seq, seq6_rig(), [0]) == pytest.approx(0.0 if len(in_sight) == 1 else 1 / 6)
+
+
+def test_the_simulator_reports_people_too_hidden_for_a_box_as_in_sight() -> None:
+    (preset,) = paper_presets(0.1, [5])
+    seq = simulate(preset)
+    boxed = sum(len(v.person_ids) for views in seq.views for v in views)
+    in_sight = sum(len(v.in_sight_ids) for views in seq.views for v in views)
+    for views in seq.views:
+        for v in views:
+            assert set(v.person_ids.tolist()) <= set(v.in_sight_ids.tolist())
+    assert in_sight > boxed  # seq5 (occlusion 5) has people glimpsed but under a quarter visible
 
 
 def test_perfect_detections_of_one_walker_miss_only_the_frames_before_the_track_is_confirmed() -> None:
