@@ -134,7 +134,8 @@ def run_intrinsics(args: argparse.Namespace) -> int:
               "image_size is updated too (the camera's stream must have this size)")
     _save(args, changes, "K and D")
     print(f"next: mark at least {CHECKABLE_POINTS} floor points in a still frame of {args.camera} and run\n"
-          f"  bevflow calibrate extrinsics --camera {args.camera} --site {args.site} --points POINTS.csv")
+          f"  bevflow calibrate extrinsics --camera {args.camera} --site {args.site} --points POINTS.csv\n"
+          f"  (or click them on the dashboard's calibration page, /calibration.html, with the gateway serving --site {args.site})")
     return 0
 
 
@@ -238,13 +239,24 @@ def run_extrinsics(args: argparse.Namespace) -> int:
         raise UserError(str(exc)) from None
     changes = {"pose": None, "extrinsics": {"rvec": [float(v) for v in fit.rvec], "tvec": [float(v) for v in fit.t]}}
     _save(args, changes, "the pose")
-    others = [c.id for c in site.cameras if c.id != args.camera]
-    if others:
-        print("next: once every camera is calibrated and the system runs, check that overlapping cameras agree:\n"
-              f"  bevflow calibrate check --site {args.site} --live 120")
-    else:
-        print(f"next: start the system with this site: bevflow serve ... --site {args.site} (see docs/INSTALL.md)")
+    print(_next_after_extrinsics(site, args.camera, args.site))
     return 0
+
+
+def _next_after_extrinsics(site: Site, camera_id: str, path: Path) -> str:
+    """The step after one camera's pose: the cameras still on their planned pose, or the check."""
+    planned = [c.id for c in site.cameras if c.id != camera_id and c.pose is not None]
+    if planned:
+        shown = ", ".join(planned[:6]) + (f" and {len(planned) - 6} more" if len(planned) > 6 else "")
+        return (f"next: {len(planned)} camera(s) still hang at their planned pose ({shown}); calibrate the next one, "
+                "its lens first if not done yet:\n"
+                f"  bevflow calibrate intrinsics --camera {planned[0]} --site {path} --images SHOTS_DIR --board 9x6 --square 0.025\n"
+                f"  bevflow calibrate extrinsics --camera {planned[0]} --site {path} --points POINTS.csv\n"
+                "then start the system and check that overlapping cameras agree (docs/INSTALL.md, steps 5 and 6)")
+    if len(site.cameras) > 1:
+        return ("next: every camera is calibrated; start the system with this site (docs/INSTALL.md, step 6), let people walk "
+                f"through the overlaps, and check that overlapping cameras agree:\n  bevflow calibrate check --site {path} --live 120")
+    return f"next: start the system with this site: bevflow serve ... --site {path} (docs/INSTALL.md, step 6)"
 
 
 def _extrinsics_report(fit: PoseFit) -> str:

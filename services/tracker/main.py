@@ -5,8 +5,11 @@ alerts.
 
 Camera results arrive on Zenoh threads, unsynchronised and sometimes late. They go into a
 ``TickAssembler`` (capture-time slots, a bounded wait for late cameras); the main thread releases
-ready ticks in time order and steps the ``SiteTracker`` with each. A camera silent for
-``--camera-timeout`` seconds raises a ``camera_down`` alert, ended when it reports again.
+ready ticks in time order and hands each to a ``TickHandler`` (``ticks.py``): the ``SiteTracker``
+steps with it, and a ``DriftMonitor`` compares overlapping cameras' estimates of the same people
+to raise a ``calibration_drift`` alert when a camera seems to have moved (``--no-drift`` turns that
+off). A camera silent for ``--camera-timeout`` seconds raises a ``camera_down`` alert, ended when
+it reports again.
 """
 
 from __future__ import annotations
@@ -17,13 +20,15 @@ import logging
 import threading
 import time
 
-from bevflow.detections import Cylinders
+from bevflow.calibration.drift import DriftConfig
 from bevflow.live.assembler import TickAssembler
 from bevflow.live.site_tracker import SiteTracker
 from bevflow.schemas import CameraCylinders, CameraHealthEvent, Event, Occupancy, Tracks
 
 from bevflow_services import bus
+from bevflow_services.cli import UserError
 from bevflow_services.cli.serve import service_site, stop_on_signals
+from bevflow_services.tracker.ticks import TickHandler
 
 log = logging.getLogger(__name__)
 SERVICE = "tracker"
@@ -41,6 +46,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        help="recent alerts kept for a history recorder that restarts (default 10000)")
     group.add_argument("--first-id", type=int, default=1,
                        help="first track id (give the last run's next id to never reuse an id)")
+    drift = DriftConfig()
+    group.add_argument("--no-drift", action="store_true",
+                       help="do not watch for cameras that have moved since calibration (calibration_drift alerts)")
+    group.add_argument("--drift-shift", type=float, default=drift.shift_m, metavar="M",
+                       help=f"how far (metres) two overlapping cameras' estimates of the same people must move apart "
+                       f"before a camera is reported moved (default {drift.shift_m:g})")
+    group.add_argument("--drift-warmup", type=float, default=drift.warmup_s, metavar="S",
+                       help=f"seconds after start during which the cameras' normal disagreement is learnt (default {drift.warmup_s:g})")
+    group.add_argument("--drift-window", type=float, default=drift.window_s, metavar="S",
+                       help=f"seconds of recent samples compared with it (default {drift.window_s:g})")
+
+
+def drift_config(args: argparse.Namespace) -> DriftConfig | None:
+    """The drift watch's settings from the command line; None with ``--no-drift``."""
+    if args.no_drift:
+        return None
+    try:
+        return DriftConfig(warmup_s=args.drift_warmup, window_s=args.drift_window, shift_m=args.drift_shift)
+    except ValueError as exc:
+        raise UserError(f"--drift-*: {exc}") from None
 
 
 class CameraWatch:
@@ -75,6 +100,7 @@ def main(args: argparse.Namespace) -> int:
     site, site_id = service_site(args)
     keys = bus.Keys(site_id)
     tracker = SiteTracker(site, first_id=args.first_id)
+    handler = TickHandler(site, tracker, drift_config(args))
     assembler: TickAssembler[CameraCylinders] = TickAssembler(
         site.camera_ids, period_ns=int(args.tick_ms * 1e6), max_wait_ns=int(args.max_wait_ms * 1e6))
     watch = CameraWatch(site.camera_ids, int(args.camera_timeout * 1e9), time.time_ns())
@@ -97,7 +123,10 @@ def main(args: argparse.Namespace) -> int:
     events_out = bus.CachedPublication(session, keys.events, bus.JsonCodec(Event, "Event"), cache=args.event_cache)
     inbox = bus.subscribe(session, keys.cylinders("*"), bus.JsonCodec(CameraCylinders), on_cylinders, stats=stats)
     token = bus.announce(session, keys, SERVICE)
-    print(f"bevflow tracker: site {site_id!r}, {len(site.camera_ids)} cameras, tick {args.tick_ms:g} ms", flush=True)
+    drift = handler.drift.config if handler.drift is not None else None
+    watch_line = "off" if drift is None else f"on (learns for {drift.warmup_s:g} s, then reports shifts over {drift.shift_m:g} m)"
+    print(f"bevflow tracker: site {site_id!r}, {len(site.camera_ids)} cameras, tick {args.tick_ms:g} ms; "
+          f"calibration drift watch {watch_line}", flush=True)
     try:
         with stop_on_signals() as stop:
             while not stop.wait(0.01):
@@ -108,16 +137,15 @@ def main(args: argparse.Namespace) -> int:
                 for event in health:
                     events_out.put(event)
                 for tick in ticks:
-                    per_camera = {c: m.to_cylinders(site.camera_index(c)) for c, m in tick.items.items()}
                     try:
-                        step = tracker.step(tick.time_ns, per_camera)
+                        output = handler.handle(tick)
                     except Exception:  # a bug on one tick must not stop the site
                         stats.count("handler_errors")
                         log.exception("tracking failed at tick %d; skipping it", tick.time_ns)
                         continue
-                    tracks_out.put(step.tracks)
-                    occupancy_out.put(step.occupancy)
-                    for event in step.events:
+                    tracks_out.put(output.tracks)
+                    occupancy_out.put(output.occupancy)
+                    for event in output.events:
                         events_out.put(event)
     finally:
         token.undeclare()

@@ -29,6 +29,7 @@ from __future__ import annotations
 import csv
 import io
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -152,6 +153,19 @@ def parse_points_yaml(text: str, source: str = "<points>") -> Correspondences:
             raise ExtrinsicsError(f"{source}: point {name!r}: pixel needs 2 numbers and world 2 or 3")
         points.append((name, pixel, world + [0.0] * (3 - len(world))))
     return _correspondences(points, source)
+
+
+def make_correspondences(
+    points: Sequence[tuple[str, Sequence[float], Sequence[float]]], source: str = "<points>"
+) -> Correspondences:
+    """Correspondences from ``(name, (u, v), (x, y) or (x, y, z))`` rows, as a form or an API
+    sends them (a floor point may leave out z); ``ExtrinsicsError`` names the first bad point."""
+    rows = []
+    for name, pixel, world in points:
+        if len(pixel) != 2 or len(world) not in (2, 3):
+            raise ExtrinsicsError(f"{source}: point {name!r}: pixel needs 2 numbers and world 2 or 3")
+        rows.append((str(name), [float(v) for v in pixel], [float(v) for v in world] + [0.0] * (3 - len(world))))
+    return _correspondences(rows, source)
 
 
 def _correspondences(points: list[tuple[str, list[float], list[float]]], source: str) -> Correspondences:

@@ -16,6 +16,7 @@ from bevflow.calibration.extrinsics import (
     ExtrinsicsError,
     check_fit,
     estimate_pose,
+    make_correspondences,
     parse_points_csv,
     parse_points_yaml,
     pose_summary,
@@ -163,3 +164,24 @@ def test_yaml_points() -> None:
 def test_bad_points_files(text: str, parse, message: str) -> None:  # type: ignore[no-untyped-def]
     with pytest.raises(ExtrinsicsError, match=message):
         parse(text, source="pts")
+
+
+def test_correspondences_from_rows() -> None:
+    points = make_correspondences([("a", (10.0, 20.0), (1.0, 2.0)), ("b", [30, 40], [3, 4, 0.5])])
+    assert points.names == ("a", "b")
+    np.testing.assert_array_equal(points.pixels, [[10, 20], [30, 40]])
+    np.testing.assert_array_equal(points.world, [[1, 2, 0], [3, 4, 0.5]])  # a floor point's z is 0
+
+
+@pytest.mark.parametrize(
+    ("rows", "message"),
+    [
+        ([("a", (1.0,), (1.0, 2.0))], "point 'a': pixel needs 2 numbers"),
+        ([("a", (1.0, 2.0), (1.0,))], "world 2 or 3"),
+        ([("a", (1.0, 2.0), (1.0, 2.0)), ("a", (3.0, 4.0), (3.0, 4.0))], "repeated: a"),
+        ([("a", (float("nan"), 2.0), (1.0, 2.0))], "finite"),
+    ],
+)
+def test_bad_correspondence_rows(rows: list, message: str) -> None:
+    with pytest.raises(ExtrinsicsError, match=message):
+        make_correspondences(rows, source="form")

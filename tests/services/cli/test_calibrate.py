@@ -120,7 +120,8 @@ def test_extrinsics_writes_the_pose(site_file: Path, tmp_path: Path, capsys: pyt
     rc = main(["calibrate", "extrinsics", "--camera", "door", "--points", str(points_file(tmp_path / "p.csv")), "--site", str(site_file)])
     assert rc == 0
     out = capsys.readouterr().out
-    assert "mark11" in out and "camera centre (2.0" in out and "calibrate check" in out
+    assert "mark11" in out and "camera centre (2.0" in out
+    assert "next: 1 camera(s) still hang at their planned pose (till)" in out and "extrinsics --camera till" in out
     site = load_site(site_file)
     door = site.cameras[0]
     assert door.pose is None and door.extrinsics is not None
@@ -245,3 +246,30 @@ def test_check_does_not_judge_pairs_with_few_samples(capsys: pytest.CaptureFixtu
     assert main(["calibrate", "check", "--sim", "seq1", "--frames", "300", "--min-samples", "1000"]) == 0
     out = capsys.readouterr().out
     assert "too few samples to judge" in out and "no pair has enough samples" in out
+
+
+EXTRINSICS = "extrinsics: {rvec: [3.14159, 0, 0], tvec: [-2, 3, 3.3]}"
+
+
+@pytest.mark.parametrize(
+    ("till_pose", "cameras", "expected"),
+    [
+        ("pose: {position: [8.0, 3.0, 3.3]}", 2, ["1 camera(s) still hang at their planned pose (till)", "intrinsics --camera till",
+                                                 "extrinsics --camera till"]),
+        (EXTRINSICS, 2, ["every camera is calibrated", "bevflow calibrate check --site SITE --live 120"]),
+        (EXTRINSICS, 1, ["start the system with this site", "step 6"]),
+    ],
+    ids=["one-left", "all-done", "single-camera"],
+)
+def test_the_step_after_a_pose(till_pose: str, cameras: int, expected: list[str]) -> None:
+    from bevflow.site import parse_site
+
+    from bevflow_services.cli.calibrate import _next_after_extrinsics
+
+    text = SITE.replace("pose: {position: [8.0, 3.0, 3.3]}", till_pose)
+    if cameras == 1:
+        text = text[: text.index("  - id: till")]
+    message = _next_after_extrinsics(parse_site(text), "door", Path("SITE"))
+    assert message.startswith("next: ")
+    for part in expected:
+        assert part in message
