@@ -1,45 +1,65 @@
-// Alert acknowledgements.
+// Alert acknowledgements, kept by the gateway: who acknowledged which alert, and when.
 //
-// The gateway has no acknowledgement endpoint yet, so they are kept in this browser's localStorage,
-// per site: an operator's acknowledgements survive a page reload but are not shared with other
-// screens. When the gateway stores them (with the user who acknowledged), only
-// `acknowledgeAlert` (becomes a POST) and `loadAcknowledgements` (becomes a GET, or a field of each
-// alert) change; the rest of the dashboard goes through these two functions.
+// `loadAcknowledgements` fetches the recent ones and returns a Map (alert id -> {at, by, note})
+// that stays live: acknowledgements made on other screens arrive over /ws/acknowledgements and
+// are added to it, and the alert feed, which re-renders every second, shows them. After a lost
+// connection the list is fetched again, so none made meanwhile is missed.
 
-const MAX_KEPT = 1000; // acknowledgements of alerts long gone are dropped, oldest first
+import { LiveSocket, getJson } from "./api.js";
 
-function storageKey(site) {
-  return `bevflow.acknowledged.${site}`;
+const live = new Map(); // site -> {records, socket}
+
+function record(ack) {
+  return { at: ack.time, by: ack.user, note: ack.note };
 }
 
-function readStore(site) {
-  try {
-    const stored = JSON.parse(localStorage.getItem(storageKey(site)) || "{}");
-    return stored && typeof stored === "object" ? stored : {};
-  } catch {
-    return {}; // unreadable (another version, or storage disabled): start afresh
-  }
+function remember(records, acks) {
+  // Acknowledgements come oldest first; the first one is the one shown ("acknowledged 14:02").
+  for (const ack of acks) if (!records.has(ack.alert_id)) records.set(ack.alert_id, record(ack));
 }
 
-/** Every acknowledgement known for `site`: a Map from alert id to {at: ISO time}. */
+/** Every acknowledgement the gateway knows of recent alerts: a Map from alert id to
+ * {at: ISO time, by: user, note}, kept up to date with those made on other screens. */
 export async function loadAcknowledgements(site) {
-  return new Map(Object.entries(readStore(site)));
+  const known = live.get(site);
+  if (known) return known.records;
+  const records = new Map();
+  const refresh = async () => remember(records, await getJson("/api/acknowledgements"));
+  try {
+    await refresh();
+  } catch {
+    // the gateway is unreachable: the socket below catches up when it is back
+  }
+  const socket = new LiveSocket("/ws/acknowledgements", {
+    onMessage: (ack) => remember(records, [ack]),
+    onStatus: ({ state }) => state === "open" && refresh().catch(() => {}),
+  });
+  socket.start();
+  live.set(site, { records, socket });
+  return records;
 }
 
 /**
- * Acknowledge alert `alertId` of `site`; resolves to {at: ISO time} once recorded.
- * Later: `POST /api/alerts/{alertId}/acknowledge` and return the gateway's record.
+ * Acknowledge alert `alertId` of `site`; resolves to {at, by, note} once the gateway has stored it.
+ * Throws an Error saying why not (not allowed for a viewer, unknown alert, gateway unreachable).
  */
-export async function acknowledgeAlert(site, alertId) {
-  const store = readStore(site);
-  const record = { at: new Date().toISOString() };
-  store[alertId] = record;
-  const ids = Object.keys(store);
-  for (const old of ids.slice(0, Math.max(0, ids.length - MAX_KEPT))) delete store[old];
+export async function acknowledgeAlert(site, alertId, note = "") {
+  let response;
   try {
-    localStorage.setItem(storageKey(site), JSON.stringify(store));
+    response = await fetch(`/api/alerts/${encodeURIComponent(alertId)}/acknowledge`, {
+      method: "POST",
+      headers: { "Content-Type": "application/json", Accept: "application/json" },
+      body: JSON.stringify({ note }),
+      credentials: "same-origin",
+    });
   } catch {
-    // storage full or disabled: the acknowledgement still holds until the page is reloaded
+    throw new Error("the gateway does not answer");
   }
-  return record;
+  const answer = await response.json().catch(() => ({}));
+  if (response.status === 401) location.assign(`/login.html?next=${encodeURIComponent(location.pathname)}`);
+  if (!response.ok) throw new Error(typeof answer.detail === "string" ? answer.detail : `HTTP ${response.status}`);
+  const stored = record(answer);
+  const records = live.get(site)?.records;
+  if (records && !records.has(alertId)) records.set(alertId, stored);
+  return records?.get(alertId) || stored;
 }

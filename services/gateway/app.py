@@ -15,10 +15,10 @@ from contextlib import AbstractAsyncContextManager, asynccontextmanager
 from pathlib import Path
 from typing import Any
 
-from fastapi import FastAPI, Request
+from fastapi import Depends, FastAPI, Request
 from fastapi.encoders import jsonable_encoder
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import FileResponse, HTMLResponse, JSONResponse
+from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, RedirectResponse, Response
 from fastapi.staticfiles import StaticFiles
 from pydantic import TypeAdapter
 
@@ -26,10 +26,15 @@ import bevflow_dashboard
 from bevflow.schemas import AlertMessage, Tracks
 from bevflow.site import Site
 
-from bevflow_services.gateway.routes import alerts, cameras, health, intervals, occupancy, streams, tracks
+from bevflow_services.gateway.auth import Access, get_access, require_role
+from bevflow_services.gateway.auth_headers import add_security_middleware
+from bevflow_services.gateway.routes import acknowledge, alerts, cameras, health, intervals, occupancy, streams, tracks
+from bevflow_services.gateway.routes import auth as auth_routes
+from bevflow_services.gateway.routes import calibration as calibration_routes
 from bevflow_services.gateway.routes import history as history_routes
 from bevflow_services.gateway.routes import reports
 from bevflow_services.gateway.routes import site as site_routes
+from bevflow_services.gateway.routes import users as users_routes
 from bevflow_services.gateway.state import GatewayState
 
 log = logging.getLogger(__name__)
@@ -77,6 +82,7 @@ def create_app(
     view3d_host: str = "127.0.0.1",
     view3d_rate_hz: float = 5.0,
     feed: Callable[[], AbstractAsyncContextManager[object]] | None = None,
+    access: Access | None = None,
 ) -> FastAPI:
     """The gateway application for ``site``, reading ``state``.
 
@@ -86,6 +92,8 @@ def create_app(
         view3d_port: port of the viser 3D view, started with the app's lifespan; None: no 3D view.
         feed: entered for the app's lifespan, after the 3D view starts: what feeds ``state``
             (``main`` passes the bus subscriptions).
+        access: users, roles and security settings (see ``auth``); None: no login, every request
+            acts as an admin (what tests and ``--auth off`` on loopback use).
     """
     if state.site is not site and state.site != site:
         raise ValueError(f"the state is for site {state.site.site!r}, not {site.site!r}")
@@ -126,9 +134,20 @@ def create_app(
     app.state.view3d_port = None
     app.state.history_s = getattr(state.history, "retention_ns", 3600 * 10**9) / 1e9
 
-    for module in (occupancy, intervals, tracks, alerts, cameras, health, site_routes, streams, history_routes, reports):
+    app.state.access = access if access is not None else Access.disabled()
+    access = app.state.access
+
+    # Who may call what. Routes that trace a person (a track's path and contacts, track
+    # summaries) and acknowledging alerts need the operator role on the route itself; the
+    # streams check their clients themselves; health answers anyone, for load balancers.
+    viewer, admin = [Depends(require_role("viewer"))], [Depends(require_role("admin"))]
+    for module in (occupancy, intervals, tracks, alerts, cameras, site_routes, history_routes, reports):
+        app.include_router(module.router, dependencies=viewer)
+    app.include_router(calibration_routes.router, dependencies=admin)
+    for module in (health, streams, acknowledge, auth_routes, users_routes):
         app.include_router(module.router)
     app.add_exception_handler(RequestValidationError, _validation_error)
+    add_security_middleware(app, access.cors_origins, hsts=access.secure_cookies)
     _serve_dashboard(app, dashboard)
     app.openapi = lambda: _openapi(app)  # type: ignore[method-assign]
     return app
@@ -145,14 +164,52 @@ async def _validation_error(request: Request, exc: Exception) -> JSONResponse:
     return JSONResponse(status_code=422, content={"message": message, "detail": jsonable_encoder(errors)})
 
 
+# The dashboard's pages and the role each needs; their scripts and styles are public (they hold
+# no data), and so is the login page.
+PAGES = {"index.html": "viewer", "calibration.html": "admin"}
+
+
+def _page_response(request: Request, folder: Path, name: str) -> Response:
+    """A dashboard page for a user with its role; the login page for anyone else."""
+    principal = get_access(request).principal(request)
+    role = PAGES[name]
+    if principal is None:
+        target = "/" if name == "index.html" else f"/{name}"
+        return RedirectResponse(f"/login.html?next={target}", status_code=303)
+    if not principal.can(role):
+        return HTMLResponse(FORBIDDEN.format(role=role, name=principal.name, user_role=principal.role), status_code=403)
+    page = folder / name
+    if page.is_file():
+        return FileResponse(page, headers={"Cache-Control": "no-store"})
+    return HTMLResponse(PLACEHOLDER) if name == "index.html" else HTMLResponse("not found", status_code=404)
+
+
+FORBIDDEN = """<!doctype html>
+<html lang="en"><head><meta charset="utf-8"><title>bevflow: not allowed</title>
+<link rel="stylesheet" href="/style.css"><link rel="stylesheet" href="/css/login.css"></head>
+<body><main class="login-page"><h1>Not allowed</h1>
+<p>This page needs the {role} role; {name} is a {user_role}.</p>
+<p><a href="/">Dashboard</a> · <a href="/logout">Log in as someone else</a></p></main></body></html>
+"""
+
+
 def _serve_dashboard(app: FastAPI, folder: Path) -> None:
     @app.get("/", include_in_schema=False)
-    def index() -> Any:
-        page = folder / "index.html"
-        return FileResponse(page) if page.is_file() else HTMLResponse(PLACEHOLDER)
+    def index(request: Request) -> Response:
+        return _page_response(request, folder, "index.html")
+
+    for name in PAGES:
+        app.add_api_route(f"/{name}", _page_route(folder, name), methods=["GET"], include_in_schema=False)
 
     # Last, so it only answers paths no route claimed (the dashboard's scripts and styles).
     app.mount("/", StaticFiles(directory=folder, check_dir=False), name="dashboard")
+
+
+def _page_route(folder: Path, name: str) -> Callable[[Request], Response]:
+    def page(request: Request) -> Response:
+        return _page_response(request, folder, name)
+
+    return page
 
 
 def _openapi(app: FastAPI) -> dict[str, Any]:

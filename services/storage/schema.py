@@ -16,6 +16,7 @@ Tables (times are capture times in ns; ``zone`` '' is the whole site):
   in and when, and its feet positions (no images, ever).
 - ``acknowledgements``: who acknowledged an alert, and when.
 - ``settings``: what the recorder was told (its retention policy, as JSON), for readers.
+- ``users``, ``sessions``, ``api_tokens``, ``audit``: access control (``storage.access``).
 """
 
 from __future__ import annotations
@@ -80,7 +81,39 @@ V1 = [
     "CREATE TABLE settings (name {key_text} PRIMARY KEY, value TEXT NOT NULL)",
 ]
 
-MIGRATIONS: list[list[str]] = [V1]
+# Access control (``bevflow_services.storage.access``): users, dashboard sessions, API tokens,
+# and the audit log of who traced which person. Sessions and tokens are stored as SHA-256 digests.
+V2 = [
+    """CREATE TABLE users (
+        name {key_text} PRIMARY KEY,
+        role TEXT NOT NULL,
+        password_hash TEXT NOT NULL,
+        created_ns BIGINT NOT NULL)""",
+    """CREATE TABLE sessions (
+        digest {key_text} PRIMARY KEY,
+        user_name {key_text} NOT NULL,
+        created_ns BIGINT NOT NULL,
+        expires_ns BIGINT NOT NULL)""",
+    "CREATE INDEX sessions_by_user ON sessions (user_name)",
+    """CREATE TABLE api_tokens (
+        id {id_pk},
+        digest {key_text} NOT NULL UNIQUE,
+        user_name {key_text} NOT NULL,
+        label TEXT NOT NULL,
+        created_ns BIGINT NOT NULL)""",
+    "CREATE INDEX api_tokens_by_user ON api_tokens (user_name)",
+    """CREATE TABLE audit (
+        id {id_pk},
+        time_ns BIGINT NOT NULL,
+        user_name TEXT NOT NULL,
+        action TEXT NOT NULL,
+        track_id BIGINT,
+        client TEXT NOT NULL,
+        detail TEXT NOT NULL)""",
+    "CREATE INDEX audit_by_time ON audit (time_ns)",
+]
+
+MIGRATIONS: list[list[str]] = [V1, V2]
 LATEST = len(MIGRATIONS)
 
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import time
 
 from bevflow.schemas import DistanceViolation, OverCapacity
@@ -56,8 +55,8 @@ def test_acknowledge_marks_the_alert_and_survives_a_reload(page: Page, gateway: 
     assert page.evaluate(f"{alert_node('oc-ack')}.querySelector('.ack-button')") is None
     assert "acknowledged" in page.evaluate(f"{alert_node('oc-ack')}.textContent")
     assert page.evaluate("window.bevflow.attention") == before - 1
-    stored = json.loads(page.evaluate("localStorage.getItem('bevflow.acknowledged.hall')"))
-    assert "oc-ack" in stored
+    stored = page.evaluate("fetch('/api/acknowledgements?ids=oc-ack').then((r) => r.json())")
+    assert [(a["alert_id"], a["user"]) for a in stored] == [("oc-ack", "local")]  # kept by the gateway
 
     page.reload()
     page.wait_for(f"window.bevflow && window.bevflow.ready && {alert_node('oc-ack')}", timeout_s=10, what="the reloaded feed")

@@ -5,6 +5,8 @@ from __future__ import annotations
 from typing import Annotated
 
 from fastapi import APIRouter, Query
+from pydantic import Field
+from starlette.requests import HTTPConnection
 
 from bevflow.schemas import EVENT_TYPES, AlertMessage
 
@@ -20,6 +22,7 @@ from bevflow_services.gateway.params import (
     check_zone,
     split_csv,
 )
+from bevflow_services.gateway.routes.acknowledge import AcknowledgementView, acknowledgements_of
 
 router = APIRouter(prefix="/api", tags=["alerts"])
 
@@ -35,14 +38,23 @@ def event_query(site, window, types: frozenset[str] | None, zone: str | None, tr
                       since_ns=window.since_ns, until_ns=window.until_ns)
 
 
-def _page(state: StateDep, query: EventQuery, limit: int, offset: int) -> Page[AlertMessage]:
+class AlertItem(AlertMessage):
+    """An alert as ``/ws/alerts`` sends it, with who has acknowledged it."""
+
+    acknowledgements: list[AcknowledgementView] = Field(default_factory=list, description="oldest first; empty: nobody yet")
+
+
+def _page(state: StateDep, conn: HTTPConnection, query: EventQuery, limit: int, offset: int) -> Page[AlertItem]:
     events, total = state.history.events(query, limit, offset)
-    return Page[AlertMessage](items=[AlertMessage.from_event(e) for e in events], total=total, limit=limit, offset=offset)
+    acks = acknowledgements_of(conn, [e.id for e in events])
+    items = [AlertItem(**AlertMessage.from_event(e).model_dump(), acknowledgements=acks.get(e.id, [])) for e in events]
+    return Page[AlertItem](items=items, total=total, limit=limit, offset=offset)
 
 
-@router.get("/violations", response_model=Page[AlertMessage], summary="Distance violations, newest first")
+@router.get("/violations", response_model=Page[AlertItem], summary="Distance violations, newest first")
 def violations(
     state: StateDep,
+    conn: HTTPConnection,
     site: SiteDep,
     window: TimeRangeDep,
     zone: ZoneParam = None,
@@ -50,16 +62,17 @@ def violations(
     active: ActiveParam = None,
     limit: Limit = 100,
     offset: Offset = 0,
-) -> Page[AlertMessage]:
+) -> Page[AlertItem]:
     """Pairs of people closer than the social-distance limit for longer than the minimum duration.
     A violation overlapping [since, until] is listed; ``event.min_distance_m`` is the closest approach."""
     query = event_query(site, window, frozenset({"distance_violation"}), zone, track, active)
-    return _page(state, query, limit, offset)
+    return _page(state, conn, query, limit, offset)
 
 
-@router.get("/alerts", response_model=Page[AlertMessage], summary="Alerts of every type, newest first")
+@router.get("/alerts", response_model=Page[AlertItem], summary="Alerts of every type, newest first")
 def alerts(
     state: StateDep,
+    conn: HTTPConnection,
     site: SiteDep,
     window: TimeRangeDep,
     types: TypesParam = None,
@@ -68,7 +81,7 @@ def alerts(
     active: ActiveParam = None,
     limit: Limit = 100,
     offset: Offset = 0,
-) -> Page[AlertMessage]:
+) -> Page[AlertItem]:
     """The same objects ``/ws/alerts`` sends, for filling an alert feed when a page opens."""
     query = event_query(site, window, split_csv(types, "types", EVENT_TYPES), zone, track, active)
-    return _page(state, query, limit, offset)
+    return _page(state, conn, query, limit, offset)

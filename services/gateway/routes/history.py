@@ -13,12 +13,13 @@ import io
 from collections.abc import Iterable, Sequence
 from typing import Annotated, Any, Literal
 
-from fastapi import APIRouter, HTTPException, Query
+from fastapi import APIRouter, HTTPException, Query, Request
 from fastapi.responses import Response
 from pydantic import BaseModel, Field
 
 from bevflow.schemas import EVENT_TYPES, Event, iso_utc
 
+from bevflow_services.gateway.auth import AccessDep, Operator
 from bevflow_services.gateway.history import EventQuery, HistoryStore, OccupancySample
 from bevflow_services.gateway.params import (
     NS,
@@ -34,6 +35,7 @@ from bevflow_services.gateway.params import (
 )
 from bevflow_services.gateway.routes.alerts import event_query
 from bevflow_services.gateway.routes.occupancy import downsample
+from bevflow_services.gateway.routes.users import record_trace
 
 router = APIRouter(prefix="/api/history", tags=["history"])
 
@@ -208,12 +210,16 @@ def track_history(
     state: StateDep,
     site: SiteDep,
     window: TimeRangeDep,
+    request: Request,
+    access: AccessDep,
+    _: Operator,
     zone: ZoneParam = None,
     limit: RowLimit = 1000,
     offset: Offset = 0,
     fmt: Format = "json",
 ) -> Any:
     """A track seen at any time within [since, until] is listed. Needs the history database."""
+    record_trace(request, access, "track_summaries", None, f"zone={zone or ''}")
     summaries_of = getattr(state.history, "track_summaries", None)
     if summaries_of is None:
         raise HTTPException(404, "track summaries are kept only in the history database: start the gateway with --db")

@@ -7,6 +7,9 @@ one to get everything; an alert with zone null only passes when ``zones`` is omi
 ``replay=active`` first sends the alerts already ongoing. ``/ws/tracks`` sends one ``Tracks`` JSON
 object per tick, starting with the latest one.
 
+Clients prove who they are as for REST (the dashboard's session cookie, or an API token in the
+``Authorization`` header) or with ``?token=TOKEN``; without either the connection is refused with
+401, and ``/ws/tracks`` and ``/ws/alerts`` need the viewer role (403 otherwise).
 A bad parameter refuses the connection with HTTP 400 and ``{"detail": "..."}`` naming it (or, on a
 server without the websocket denial-response extension, closes with code 1008 and that reason).
 Clients never send anything; what they send is ignored.
@@ -24,6 +27,7 @@ from pydantic import BaseModel
 
 from bevflow.schemas import EVENT_TYPES, AlertMessage, Tracks
 
+from bevflow_services.gateway.auth import get_access
 from bevflow_services.gateway.fanout import Subscription, pump
 from bevflow_services.gateway.params import split_csv
 from bevflow_services.gateway.state import GatewayState
@@ -49,7 +53,7 @@ class AlertFilter:
 
 def alert_filter(query: Any, state: GatewayState) -> tuple[AlertFilter, bool]:
     """The filter and the replay flag from the query string; HTTPException naming a bad parameter."""
-    unknown = sorted(set(query.keys()) - {"types", "zones", "replay"})
+    unknown = sorted(set(query.keys()) - {"types", "zones", "replay", "token"})
     if unknown:
         raise HTTPException(400, f"unknown parameter(s) {', '.join(unknown)}; allowed: types, zones, replay")
     types = split_csv(query.get("types"), "types", EVENT_TYPES)
@@ -65,6 +69,30 @@ async def refuse(websocket: WebSocket, exc: HTTPException) -> None:
         await websocket.send_denial_response(JSONResponse({"detail": exc.detail}, status_code=exc.status_code))
     else:
         await websocket.close(code=1008, reason=str(exc.detail)[:120])
+
+
+async def authorized(websocket: WebSocket, role: str = "viewer") -> bool:
+    """Whether the client may have this stream; if not, refuses it (401 or 403) and says False."""
+    principal = get_access(websocket).principal(websocket)
+    if principal is None:
+        await refuse(websocket, HTTPException(401, "log in, or pass an API token (?token=TOKEN)"))
+        return False
+    if not principal.can(role):
+        await refuse(websocket, HTTPException(403, f"this stream needs the {role} role; {principal.name} is a {principal.role}"))
+        return False
+    if principal.via == "session" and not same_origin(websocket):
+        # Another site's page opening a socket with the user's cookie (browsers that ignore SameSite).
+        await refuse(websocket, HTTPException(403, "a session cookie is accepted only from the gateway's own pages"))
+        return False
+    return True
+
+
+def same_origin(websocket: WebSocket) -> bool:
+    """Whether the handshake's Origin (if the client sent one) is the host it connected to."""
+    origin = websocket.headers.get("origin")
+    if origin is None:
+        return True  # not a browser
+    return origin.split("://", 1)[-1].rstrip("/") == websocket.headers.get("host", "")
 
 
 async def serve(websocket: WebSocket, sub: Subscription[Any], send: Callable[[Any], Awaitable[None]]) -> None:
@@ -96,6 +124,8 @@ def json_sender(websocket: WebSocket) -> Callable[[BaseModel], Awaitable[None]]:
 @router.websocket("/ws/alerts")
 async def alerts_stream(websocket: WebSocket) -> None:
     state: GatewayState = websocket.app.state.gateway
+    if not await authorized(websocket):
+        return
     try:
         wanted, replay = alert_filter(websocket.query_params, state)
     except HTTPException as exc:
@@ -118,9 +148,12 @@ async def alerts_stream(websocket: WebSocket) -> None:
 @router.websocket("/ws/tracks")
 async def tracks_stream(websocket: WebSocket) -> None:
     state: GatewayState = websocket.app.state.gateway
-    if websocket.query_params:
-        names = ", ".join(sorted(websocket.query_params.keys()))
-        await refuse(websocket, HTTPException(400, f"unknown parameter(s) {names}; /ws/tracks takes none"))
+    if not await authorized(websocket):
+        return
+    unknown = sorted(set(websocket.query_params.keys()) - {"token"})
+    if unknown:
+        names = ", ".join(unknown)
+        await refuse(websocket, HTTPException(400, f"unknown parameter(s) {names}; /ws/tracks takes only token"))
         return
     send_json = json_sender(websocket)
     newest_sent = -1
@@ -137,3 +170,17 @@ async def tracks_stream(websocket: WebSocket) -> None:
         if latest is not None:
             await send(latest)
         await serve(websocket, sub, send)
+
+
+@router.websocket("/ws/acknowledgements")
+async def acknowledgements_stream(websocket: WebSocket) -> None:
+    """Alert acknowledgements as operators make them (``AcknowledgementView`` JSON per frame)."""
+    from bevflow_services.gateway.routes.acknowledge import acknowledgements_stream as stream
+
+    if not await authorized(websocket):
+        return
+    unknown = sorted(set(websocket.query_params.keys()) - {"token"})
+    if unknown:
+        await refuse(websocket, HTTPException(400, f"unknown parameter(s) {', '.join(unknown)}; takes only token"))
+        return
+    await stream(websocket)

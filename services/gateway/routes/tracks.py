@@ -4,11 +4,12 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, HTTPException, Path, Query
+from fastapi import APIRouter, HTTPException, Path, Query, Request
 from pydantic import BaseModel, Field
 
 from bevflow.schemas import Contact, TrackState, TrajectoryPoint, iso_utc
 
+from bevflow_services.gateway.auth import AccessDep, Operator
 from bevflow_services.gateway.params import (
     LastS,
     Limit,
@@ -20,6 +21,7 @@ from bevflow_services.gateway.params import (
     check_zone,
     recent,
 )
+from bevflow_services.gateway.routes.users import record_trace
 from bevflow_services.gateway.state import GatewayState
 
 router = APIRouter(prefix="/api/tracks", tags=["tracks"])
@@ -79,7 +81,10 @@ def _unknown_track(track_id: int) -> HTTPException:
 
 
 @router.get("/{track_id}", response_model=TrackDetail, summary="One track: state now and trajectory")
-def track(track_id: TrackId, state: StateDep, window: TimeRangeDep, last_s: LastS = None) -> TrackDetail:
+def track(track_id: TrackId, state: StateDep, window: TimeRangeDep, request: Request, access: AccessDep, _: Operator,
+          last_s: LastS = None) -> TrackDetail:
+    """Tracing a person: needs the operator role, and is written to the audit log."""
+    record_trace(request, access, "trajectory", track_id)
     latest = state.tracks
     window = recent(window, last_s, latest.time_ns if latest else None)
     current = _current(state, track_id)
@@ -99,10 +104,15 @@ def track_contacts(
     track_id: TrackId,
     state: StateDep,
     window: TimeRangeDep,
+    request: Request,
+    access: AccessDep,
+    _: Operator,
     distance_m: Annotated[float | None, Query(gt=0, le=50, description="contact distance; default the social distance")] = None,
     min_duration_s: Annotated[float, Query(ge=0, description="only contacts lasting at least this long")] = 0.0,
 ) -> Contacts:
+    """Tracing a person's contacts: needs the operator role, and is written to the audit log."""
     limit_m = distance_m or state.site.thresholds.social_distance_m
+    record_trace(request, access, "contacts", track_id, f"distance_m={limit_m:g}")
     found = state.history.contacts(track_id, limit_m, window.since_ns, window.until_ns)
     if found is None:
         if _current(state, track_id) is None:

@@ -104,6 +104,11 @@ def test_the_gateway_serves_what_the_bus_delivers(site: Site, sessions) -> None:
         (["--site", "no/such/site.yaml"], "cannot read the site file"),
         (["--site", "no-such-built-in-site"], "no built-in site of that name"),
         (["--site", "{site}", "--mode", "client"], "client mode needs at least one --connect endpoint"),
+        (["--site", "{site}"], "--auth on keeps its users in a database"),
+        (["--site", "{site}", "--auth", "off", "--host", "0.0.0.0"], "--auth off is only allowed when serving on loopback"),
+        (["--site", "{site}", "--auth", "off", "--tls-cert", "{site}"], "--tls-cert and --tls-key go together"),
+        (["--site", "{site}", "--auth", "off", "--tls-cert", "no.pem", "--tls-key", "no.pem"], "--tls-cert no.pem: no such file"),
+        (["--site", "{site}", "--auth", "off", "--cors-origin", "example.com"], "--cors-origin 'example.com'"),
     ],
 )
 def test_bad_arguments_are_one_line_for_the_user(tmp_path, argv: list[str], message: str) -> None:

@@ -103,7 +103,7 @@ def test_replay_sends_the_active_alerts_first(server: str, state: GatewayState) 
         ("/ws/alerts?zones=gate,roof", "zones: unknown value(s) roof; allowed: gate, shop"),
         ("/ws/alerts?replay=all", "replay: must be one of none, active, got 'all'"),
         ("/ws/alerts?zone=gate", "unknown parameter(s) zone; allowed: types, zones, replay"),
-        ("/ws/tracks?zones=gate", "unknown parameter(s) zones; /ws/tracks takes none"),
+        ("/ws/tracks?zones=gate", "unknown parameter(s) zones; /ws/tracks takes only token"),
     ],
 )
 def test_a_bad_subscription_is_refused_with_400_naming_the_parameter(server: str, path: str, detail: str) -> None:
