@@ -105,14 +105,45 @@ class ServiceGroup:
         self.stop()
 
 
-def start_pipeline(group: ServiceGroup, port: int, *, ingest_args: tuple[str, ...] = (),
-                   gateway_args: tuple[str, ...] = ()) -> str:
-    """The whole live system for a simulated site: tracker (the hub), projector, gateway and a
-    simulated ingest. Returns the gateway's base URL once it answers."""
-    group.start("tracker")
+BOXES = ("rendered", "simulated")
+TEMPORARY_DB = "temporary"
+# With the detector on a CPU, a camera's cylinders reach the tracker a few hundred ms after its
+# capture, and later still on a busy machine; a tick that went without them would drop them as
+# late. So the tracker waits longer for late cameras than with the simulator's boxes.
+DETECTOR_MAX_WAIT_MS = 400
+
+
+def start_pipeline(group: ServiceGroup, port: int, *, boxes: str = "rendered", history_db: str | Path | None = TEMPORARY_DB,
+                   ingest_args: tuple[str, ...] = (), gateway_args: tuple[str, ...] = (),
+                   detector_args: tuple[str, ...] = (), tracker_args: tuple[str, ...] | None = None) -> str:
+    """The whole live system for a simulated site. Returns the gateway's base URL once it answers.
+
+    ``boxes="rendered"``: the ingest renders every camera's frames and the detector service finds
+    the people in them (ingest → detector → projector → tracker → gateway). ``"simulated"``: the
+    ingest publishes the simulator's noisy boxes and no detector runs (the system without the
+    detector's cost). ``history_db``: a SQLite file (or database URL) the recorder writes and the
+    gateway reads its history from; ``TEMPORARY_DB`` puts one in the group's log folder; None runs
+    no recorder and the gateway keeps its history in memory. ``tracker_args`` default: a longer
+    wait for late cameras (``DETECTOR_MAX_WAIT_MS``) with the detector, none without."""
+    if boxes not in BOXES:
+        raise ValueError(f"boxes must be one of {', '.join(BOXES)}, got {boxes!r}")
+    if tracker_args is None:
+        tracker_args = ("--max-wait-ms", str(DETECTOR_MAX_WAIT_MS)) if boxes == "rendered" else ()
+    group.start("tracker", *tracker_args)
     group.start("projector")
-    group.start("gateway", "--port", str(port), *gateway_args)
+    db_args: tuple[str, ...] = ()
+    if history_db is not None:
+        db = group.log_dir / "history.db" if history_db == TEMPORARY_DB else history_db
+        db_args = ("--db", str(db))
+        group.start("recorder", *db_args)
+    # Everything listens on loopback only: no login in front of the dashboard unless asked for.
+    auth = () if "--auth" in gateway_args else ("--auth", "off")
+    group.start("gateway", "--port", str(port), *db_args, *auth, *gateway_args)
     base = f"http://127.0.0.1:{port}"
     group.wait_http(f"{base}/api/health")
-    group.start("ingest", "--simulate", *ingest_args)
+    if boxes == "rendered":
+        group.start("detector", *detector_args)
+        group.start("ingest", "--simulate", "--render", *ingest_args)
+    else:
+        group.start("ingest", "--simulate", *ingest_args)
     return base

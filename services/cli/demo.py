@@ -17,7 +17,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="run the live demo: a simulated hall, every service, the dashboard",
         description=(
             "Start every bevflow service on this machine over Zenoh on loopback: a built-in hall "
-            "with nine ceiling fisheye cameras and a simulated crowd, the tracker, the REST API, "
+            "with nine ceiling fisheye cameras watching a simulated crowd (their frames rendered and "
+            "run through the person detector), the tracker, the history recorder, the REST API, "
             "the dashboard and the 3D view. Stop with Ctrl-C."
         ),
     )
@@ -25,12 +26,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--duration", type=float, default=None, help="stop after this many seconds (default: run until Ctrl-C)")
     parser.add_argument("--site", default="demo-hall", help="site file or built-in site name (default demo-hall)")
     parser.add_argument("--people", type=int, default=None, help="people in the hall at once (default: the site's preset)")
+    parser.add_argument("--boxes", choices=("rendered", "simulated"), default="rendered",
+                        help="rendered: render the cameras' frames and run the detector on them (default); "
+                        "simulated: the simulator reports noisy boxes directly (much lighter, no detector)")
+    parser.add_argument("--history-db", default=None, metavar="URL",
+                        help="history database the recorder writes and the dashboard reads (a SQLite file or "
+                        "postgresql:// URL; default: a new SQLite file in the log folder)")
+    parser.add_argument("--no-history-db", action="store_true",
+                        help="run without the recorder; the gateway keeps the last hour in memory")
     parser.add_argument("--log-dir", type=Path, default=None, help="where the services write their logs (default: a new temporary folder)")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from bevflow_services.launcher import ServiceGroup, start_pipeline
+    from bevflow_services.launcher import TEMPORARY_DB, ServiceGroup, start_pipeline
 
     for port in (args.port, args.port + 1):
         with socket.socket() as probe:
@@ -40,12 +49,16 @@ def run(args: argparse.Namespace) -> int:
                 raise UserError(f"port {port} is already in use; choose another with --port") from None
     log_dir = args.log_dir or Path(tempfile.mkdtemp(prefix="bevflow-demo-"))
     ingest_args = ("--people", str(args.people)) if args.people is not None else ()
+    if args.no_history_db and args.history_db:
+        raise UserError("--history-db and --no-history-db contradict each other; give one of them")
+    history_db = None if args.no_history_db else (args.history_db or TEMPORARY_DB)
     with ServiceGroup(site=args.site, log_dir=log_dir) as group:
         try:
-            base = start_pipeline(group, args.port, ingest_args=ingest_args)
+            base = start_pipeline(group, args.port, boxes=args.boxes, history_db=history_db, ingest_args=ingest_args)
         except RuntimeError as exc:
             raise UserError(f"the demo could not start: {exc}\n(logs in {log_dir})") from None
-        print(f"bevflow demo is running ({len(group.children)} services, logs in {log_dir})")
+        how = "rendered frames through the detector" if args.boxes == "rendered" else "simulated boxes"
+        print(f"bevflow demo is running ({len(group.children)} services, {how}, logs in {log_dir})")
         print(f"  dashboard  {base}/")
         print(f"  3D view    http://127.0.0.1:{args.port + 1}/")
         print(f"  REST API   {base}/docs")

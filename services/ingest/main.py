@@ -1,17 +1,21 @@
 """Read the site's cameras and publish what they see.
 
     bevflow serve ingest --site site.yaml                 # cameras with a `source` in the site file
-    bevflow serve ingest --site demo-hall --simulate      # the built-in simulator
+    bevflow serve ingest --site demo-hall --simulate      # the simulator's boxes (no detector)
+    bevflow serve ingest --site demo-hall --simulate --render   # rendered frames, for the detector
 
 Real cameras: each camera's ``source`` (RTSP/HTTP URL, video file or image folder) is read on
 its own thread and its newest frame published with its capture time and sequence number; a
 camera that drops is reopened with backoff and the others go on. A slow network gets the latest
 frame, not a backlog: frames not yet sent are overwritten (counted).
 
-Simulation: a crowd walks through the site in real time and every camera reports the boxes of
-the people it sees, through the detector-noise model, straight onto the detections key (the
-stage a detector would fill), plus the simulator's ground truth for scoring. If the machine
-cannot keep up, late frames are skipped at the source and counted, never queued.
+Simulation: a crowd walks through the site in real time, and the simulator's ground truth is
+published for scoring. With ``--render`` every camera's view is rendered through its own fisheye
+model at the detector's input scale and published as a frame (capture time, sequence number =
+the scene's frame number), for the detector service to find the people in. Without it every
+camera reports the boxes of the people it sees, through the detector-noise model, straight onto
+the detections key (the stage a detector would fill). If the machine cannot keep up, late frames
+are skipped at the source and counted, never queued.
 """
 
 from __future__ import annotations
@@ -23,6 +27,8 @@ import time
 from bevflow.schemas import Detections2D, FrameHeader, SimulatedTruth
 from bevflow.sim.feed import LIVE_NOISE, SimulatedFeed, scene_for_site
 from bevflow.sim.noise import DetectorNoise
+from bevflow.sim.render_feed import RenderedCameras
+from bevflow.sim.render_textures import Appearance
 from bevflow.site import Site
 
 from bevflow_services import bus
@@ -38,6 +44,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("ingest")
     group.add_argument("--simulate", action="store_true",
                        help="simulate a crowd and the cameras' detections instead of reading the cameras")
+    group.add_argument("--render", action="store_true",
+                       help="simulation: publish rendered frames (for the detector service) instead of boxes")
     group.add_argument("--cameras", default="", help="comma-separated camera ids to serve (default: all)")
     group.add_argument("--people", type=int, default=None, help="simulation: people on the floor at once")
     group.add_argument("--seed", type=int, default=0, help="simulation: random seed")
@@ -50,6 +58,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     site, site_id = service_site(args)
+    if args.render and not args.simulate:
+        raise UserError("--render renders the simulator's frames; use it with --simulate")
     cameras = [c for c in args.cameras.split(",") if c] or site.camera_ids
     unknown = sorted(set(cameras) - set(site.camera_ids))
     if unknown:
@@ -59,7 +69,9 @@ def main(args: argparse.Namespace) -> int:
     token = bus.announce(session, keys, SERVICE)
     try:
         with stop_on_signals() as stop:
-            if args.simulate:
+            if args.simulate and args.render:
+                simulate_frames(session, keys, site, cameras, args, stop)
+            elif args.simulate:
                 noise = DetectorNoise(jitter=args.jitter, drop=args.drop, false_positives=args.false_positives)
                 simulate(session, keys, site, cameras, noise, args, stop)
             else:
@@ -96,6 +108,47 @@ def simulate(session, keys: bus.Keys, site: Site, cameras: list[str], noise: Det
             publications[camera].put(Detections2D.from_boxes(camera, frame.index, capture_ns, boxes))
         truth_out.put(SimulatedTruth(
             site=site.site, frame=frame.index, capture_ns=capture_ns, tracks=truth.track_ids.tolist(),
+            positions=[(float(x), float(y)) for x, y in truth.feet_xy]))
+    for publication in [*publications.values(), truth_out]:
+        publication.close()
+
+
+def simulate_frames(session, keys: bus.Keys, site: Site, cameras: list[str], args: argparse.Namespace,
+                    stop) -> None:
+    """Render every camera's view of the simulated crowd at the scene's frame rate and publish
+    the frames; late scene frames are skipped whole (every camera), so cameras stay in step."""
+    feed = SimulatedFeed(scene_for_site(site, people=args.people, seed=args.seed), seed=args.seed)
+    renderers = RenderedCameras(site, feed.preset.scene, cameras, seed=args.seed)
+    publications = {c: bus.Publication(session, keys.frame(c), bus.FRAMES) for c in cameras}
+    truth_out = bus.Publication(session, keys.truth, bus.JsonCodec(SimulatedTruth))
+    sizes = {c: renderers.frame_size(c) for c in cameras}
+    period_ns = int(1e9 / feed.fps)
+    start_ns = time.time_ns()
+    skipped = 0
+    shown = ", ".join(f"{c} {w}x{h}" for c, (w, h) in sizes.items())
+    print(f"bevflow ingest: rendering {len(cameras)} cameras of {site.site!r} at {feed.fps:g} fps ({shown})", flush=True)
+    for scene_frame, truth in feed.scene_frames():
+        due_ns = start_ns + scene_frame.index * period_ns
+        if stop.wait(max(0.0, (due_ns - time.time_ns()) / 1e9)):
+            break
+        if time.time_ns() - due_ns > period_ns:  # fell behind: drop this frame at the source
+            skipped += 1
+            if skipped % 100 == 1:
+                log.warning("rendering behind real time; %d frames skipped so far", skipped)
+            continue
+        # The capture time is when the scene looked like this; rendering is the camera's readout.
+        capture_ns = time.time_ns()
+        bodies = scene_frame.primitives()
+        appearance = Appearance.for_identities(scene_frame.identity, args.seed)
+        images = {camera: renderers.render(camera, scene_frame, bodies, appearance).image for camera in cameras}
+        # All cameras' frames of this instant go out together, so a detector that takes every
+        # camera's newest frame gets frames of one instant.
+        for camera, image in images.items():
+            w, h = sizes[camera]
+            header = FrameHeader(camera=camera, seq=scene_frame.index, capture_ns=capture_ns, width=w, height=h)
+            publications[camera].put(bus.Frame(header, image))
+        truth_out.put(SimulatedTruth(
+            site=site.site, frame=scene_frame.index, capture_ns=capture_ns, tracks=truth.track_ids.tolist(),
             positions=[(float(x), float(y)) for x, y in truth.feet_xy]))
     for publication in [*publications.values(), truth_out]:
         publication.close()

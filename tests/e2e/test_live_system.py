@@ -65,7 +65,8 @@ def live(tmp_path_factory: pytest.TempPathFactory):
     group = ServiceGroup(site="demo-hall", log_dir=Path(tmp_path_factory.mktemp("logs")))
     port = free_port()
     try:
-        base = start_pipeline(group, port, ingest_args=("--people", str(PEOPLE)), gateway_args=("--no-view3d",))
+        base = start_pipeline(group, port, boxes="simulated", history_db=None,
+                              ingest_args=("--people", str(PEOPLE)), gateway_args=("--no-view3d",))
         truth = TruthLog(group)
         yield base, truth, group
         truth.close()

@@ -15,6 +15,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import functools
+
 import cv2
 import numpy as np
 from numpy.typing import NDArray
@@ -171,7 +173,7 @@ class Appearance:
     @classmethod
     def for_identities(cls, identities: NDArray[np.int64], seed: int = 0) -> Appearance:
         """The same clothes for the same identity, whatever else is in the frame."""
-        parts = [cls.sample(np.random.default_rng([seed, int(i)]), 1) for i in np.asarray(identities).tolist()]
+        parts = [_identity_appearance(seed, int(i)) for i in np.asarray(identities).tolist()]
         if not parts:
             return cls.sample(np.random.default_rng(seed), 0)
         return cls(**{f: np.concatenate([getattr(p, f) for p in parts]) for f in cls.__dataclass_fields__})
@@ -200,19 +202,48 @@ class Appearance:
             color = color * (0.75 + 0.25 * (np.sin(freq * local[:, 2 if part == 2 else 0]) > 0))[:, None]
         return np.asarray(color, dtype=np.float64)
 
+    def albedo_of(self, persons: NDArray[np.int64], parts: NDArray[np.int64], local: FloatArray) -> FloatArray:
+        """``part_albedo`` for K hits at once: hit k on part ``parts[k]`` of person ``persons[k]``."""
+        persons, parts = np.asarray(persons, dtype=np.int64), np.asarray(parts, dtype=np.int64)
+        k = len(persons)
+        out = np.empty((k, 3))
+        head = parts == 0
+        covered = (local[:, 2] > 0.05) | (local[:, 0] < -0.2)
+        head_top = np.where(self.hat[persons, None], self.top[persons], self.hair[persons])
+        out[head] = np.where(covered[head, None], head_top[head], self.skin[persons[head]])
+        rules = (
+            ((1,), self.skin, None),
+            ((2, 4, 5), self.top, None),
+            ((6, 7), self.top, self.sleeves),
+            ((3, 8, 9), self.bottom, None),
+            ((10, 11), self.bottom, self.trousers),
+        )
+        assigned = head.copy()
+        for codes, cloth, covers in rules:
+            sel = np.isin(parts, codes)
+            who = persons[sel]
+            out[sel] = cloth[who] if covers is None else np.where(covers[who, None], cloth[who], self.skin[who])
+            assigned |= sel
+        out[~assigned] = self.shoes[persons[~assigned]]
+        striped = (self.stripes[persons] > 0) & np.isin(parts, (2, 4, 5))
+        if striped.any():
+            axis = np.where(parts[striped] == 2, 2, 0)
+            phase = self.stripes[persons[striped]] * local[striped, axis]
+            out[striped] *= (0.75 + 0.25 * (np.sin(phase) > 0))[:, None]
+        return out
+
+
+@functools.lru_cache(maxsize=4096)
+def _identity_appearance(seed: int, identity: int) -> Appearance:
+    # A live feed asks for the same people every frame; drawing their clothes is the slow part.
+    return Appearance.sample(np.random.default_rng([seed, identity]), 1)
+
 
 def finish_image(linear: FloatArray, radius_px: FloatArray, style: RenderStyle, rng: np.random.Generator) -> NDArray[np.uint8]:
     """Shaded colours (H, W, 3) in [0, 1] → an 8-bit BGR frame as a camera delivers it: exposure
     and white balance, gamma, vignetting (``radius_px`` is each pixel's distance from the principal
     point over the image circle's radius, NaN outside the lens), optical blur, sensor noise, JPEG."""
-    img = np.clip(linear.astype(np.float32) * style.gain.astype(np.float32), 0, 1)
-    if style.gamma != 1.0:
-        img **= np.float32(style.gamma)
-    if style.vignette > 0:
-        rim = np.clip(np.nan_to_num(radius_px, nan=1.0), 0, 1).astype(np.float32)
-        img *= (1 - np.float32(style.vignette) * rim * rim)[..., None]
-    img[np.isnan(radius_px)] = 0.0
-    out = img * np.float32(255)
+    out = _exposed(linear, radius_px, style) * np.float32(255)
     if style.blur_sigma_px > 0:
         out = cv2.GaussianBlur(out, (0, 0), style.blur_sigma_px)
     if style.noise_sigma > 0:
@@ -223,6 +254,25 @@ def finish_image(linear: FloatArray, radius_px: FloatArray, style: RenderStyle, 
         if ok:
             out8 = cv2.imdecode(buf, cv2.IMREAD_COLOR)
     return out8
+
+
+def finish_pixels(linear: FloatArray, radius_px: FloatArray, style: RenderStyle) -> NDArray[np.uint8]:
+    """``finish_image`` for N separate pixels (N, 3) with their ``radius_px`` (N,), without the
+    steps that need neighbours or randomness (blur, noise, JPEG): for a style that has none of
+    them, it gives the same values as ``finish_image``."""
+    return np.clip(_exposed(linear, radius_px, style) * np.float32(255) + 0.5, 0, 255).astype(np.uint8)
+
+
+def _exposed(linear: FloatArray, radius_px: FloatArray, style: RenderStyle) -> NDArray[np.float32]:
+    """Gain, gamma and vignetting, per pixel, in [0, 1]; black outside the lens."""
+    img = np.clip(linear.astype(np.float32) * style.gain.astype(np.float32), 0, 1)
+    if style.gamma != 1.0:
+        img **= np.float32(style.gamma)
+    if style.vignette > 0:
+        rim = np.clip(np.nan_to_num(radius_px, nan=1.0), 0, 1).astype(np.float32)
+        img *= (1 - np.float32(style.vignette) * rim * rim)[..., None]
+    img[np.isnan(radius_px)] = 0.0
+    return img
 
 
 def _random_color(

@@ -149,3 +149,61 @@ def test_appearance_must_match_the_bodies() -> None:
     renderer = FisheyeRenderer(_camera(3.3), ROOM)
     with pytest.raises(ValueError, match="appearance"):
         renderer.render(_bodies([(1.0, 0.0)]), np.array([1]), Appearance.sample(np.random.default_rng(0), 2))
+
+
+def test_the_cached_static_scene_gives_the_same_frame_as_finishing_it_whole() -> None:
+    # A style with no random faults is finished once for the static scene and then only where
+    # people are; the same style with a tiny blur goes through the whole-frame path.
+    cam = _camera(4.0)
+    bodies = _bodies([(1.0, 0.0), (-1.5, 1.2), (0.3, -2.0)])
+    renderer = FisheyeRenderer(cam, Room(ROOM.floor, 4.0, pillars=(Pillar(2.5, 2.5, 0.4, 4.0),)))
+    fast = renderer.render(bodies, np.array([1, 2, 3]))
+    style = RenderStyle.plain()
+    whole = FisheyeRenderer(cam, renderer.room).render(bodies, np.array([1, 2, 3]), style=_with(style, blur_sigma_px=1e-9))
+    np.testing.assert_array_equal(fast.owner, whole.owner)
+    assert np.abs(fast.image.astype(int) - whole.image.astype(int)).max() <= 1
+
+
+def test_a_renderer_reused_frame_after_frame_leaves_no_trace_of_earlier_people() -> None:
+    cam = _camera(3.3)
+    renderer = FisheyeRenderer(cam, ROOM)
+    empty = renderer.render(_bodies([]), np.zeros(0, np.int64))
+    renderer.render(_bodies([(0.5, 0.5), (-1.0, 0.0)]), np.array([1, 2]))
+    again = renderer.render(_bodies([]), np.zeros(0, np.int64))
+    np.testing.assert_array_equal(again.image, empty.image)
+    assert (again.owner == -1).all()
+
+
+def test_people_change_the_pixels_they_cover_and_only_those_and_their_shadow() -> None:
+    cam = _camera(3.3)
+    renderer = FisheyeRenderer(cam, ROOM)
+    empty = renderer.render(_bodies([]), np.zeros(0, np.int64)).image
+    out = renderer.render(_bodies([(1.0, 0.0)]), np.array([4]))
+    changed = (out.image != empty).any(2)
+    x0, y0, x1, y1 = out.boxes.xyxy[0]
+    rows, cols = np.nonzero(changed)
+    assert (out.owner == 0).sum() > 100
+    assert changed[out.owner == 0].mean() > 0.9
+    # Everything that changed lies near the person's box (the shadow reaches a little further).
+    assert cols.min() > x0 - 15 and cols.max() < x1 + 15 and rows.min() > y0 - 15 and rows.max() < y1 + 15
+
+
+def _with(style: RenderStyle, **changes: object) -> RenderStyle:
+    from dataclasses import replace
+
+    return replace(style, **changes)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_albedo_of_many_hits_matches_part_by_part(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    # Every kind of person: hat or hair, striped or plain top, sleeves and trousers or not.
+    appearance = _with(Appearance.sample(rng, 6), hat=np.arange(6) % 2 == 0, stripes=np.where(np.arange(6) < 3, 30.0, 0.0),
+                       sleeves=np.arange(6) % 3 == 0, trousers=np.arange(6) % 3 == 1)
+    persons = rng.integers(0, 6, 400)
+    parts = rng.integers(0, 14, 400)
+    local = rng.normal(0, 0.6, (400, 3))
+    many = appearance.albedo_of(persons, parts, local)
+    pairs = enumerate(zip(persons.tolist(), parts.tolist(), strict=True))
+    one_by_one = np.array([appearance.part_albedo(b, p, local[k : k + 1])[0] for k, (b, p) in pairs])
+    np.testing.assert_allclose(many, one_by_one)

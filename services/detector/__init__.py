@@ -1,0 +1,1 @@
+"""The detector service: people in camera frames, as 2D boxes per camera."""

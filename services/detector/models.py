@@ -1,0 +1,96 @@
+"""Which detector model each camera uses: models are plugins named in the site file.
+
+A camera's ``detector`` field names its model: the path of an ONNX file (relative paths are read
+from the site file's folder) or the name of a model shipped with bevflow (``bevflow-person-
+centernet``, the file name without ``.onnx``). A camera without one gets the model of its
+mounting height from the site's ``detectors`` list of height ranges (the paper uses one model for
+3–6 m and one for 6–10 m), e.g.
+
+    detectors:
+      - {min_height_m: 3, max_height_m: 6, model: models/low.onnx}
+      - {min_height_m: 6, max_height_m: 10, model: models/high.onnx}
+
+Without that list the shipped model, trained on renders from 3 to 10 m, covers every height.
+Cameras that name the same file share one loaded model.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+from bevflow.detect.runtime import DEFAULT_MODEL, DEFAULT_RANGES, Detector, DetectorBank, DetectorError, HeightRange
+from bevflow.site import Site
+
+SHIPPED_MODELS = DEFAULT_MODEL.parent
+
+
+def shipped_model_names() -> list[str]:
+    return sorted(p.stem for p in SHIPPED_MODELS.glob("*.onnx"))
+
+
+def resolve_model(name: str | Path, site_dir: Path | None = None) -> Path:
+    """The ONNX file a site file's ``detector`` value names; ``DetectorError`` when none exists."""
+    text = str(name)
+    candidates = [Path(text).expanduser()]
+    if site_dir is not None and not Path(text).is_absolute():
+        candidates.insert(0, site_dir / text)
+    candidates.append(SHIPPED_MODELS / (text if text.endswith(".onnx") else f"{text}.onnx"))
+    for path in candidates:
+        if path.is_file():
+            return path
+    shipped = ", ".join(shipped_model_names()) or "none"
+    raise DetectorError(f"detector model {text!r} is neither an ONNX file nor a shipped model (shipped: {shipped})")
+
+
+class CameraModels:
+    """One ``Detector`` per camera of ``site`` (those in ``cameras``, default all), loaded when
+    this is built so a bad model name fails at start-up, not on the first frame. ``default``
+    overrides the height ranges for cameras that name no model; ``ranges`` (default: the site's
+    ``detectors``, else the shipped model for every height) choose by height."""
+
+    def __init__(
+        self,
+        site: Site,
+        cameras: Sequence[str] | None = None,
+        *,
+        site_dir: Path | None = None,
+        default: str | Path | None = None,
+        ranges: Sequence[HeightRange] | None = None,
+        threads: int = 2,
+        score_threshold: float = 0.4,
+        load: type[Detector] = Detector,
+    ) -> None:
+        options = {"score_threshold": score_threshold}
+        by_path: dict[Path, Detector] = {}
+
+        def named(name: str | Path) -> Detector:
+            path = resolve_model(name, site_dir).resolve()
+            if path not in by_path:
+                by_path[path] = load(path, threads, **options)
+            return by_path[path]
+
+        if ranges is None:
+            ranges = [HeightRange(r.min_height_m, r.max_height_m, r.model) for r in site.detectors or []] or DEFAULT_RANGES
+        checked = DetectorBank(ranges).ranges  # sorted, refused if they overlap; loads nothing
+
+        def for_height(height_m: float) -> Detector:
+            for r in checked:
+                if r.min_m <= height_m < r.max_m:
+                    return named(r.model if r.model is not None else DEFAULT_MODEL)
+            spans = ", ".join(f"[{r.min_m:g}, {r.max_m:g})" for r in checked)
+            raise DetectorError(f"no detector model covers a camera {height_m:.2f} m high (ranges: {spans})")
+
+        self.detectors: dict[str, Detector] = {}
+        for config in site.cameras:
+            if cameras is not None and config.id not in cameras:
+                continue
+            name = config.detector or default
+            self.detectors[config.id] = named(name) if name is not None else for_height(config.height_m)
+
+    def __getitem__(self, camera: str) -> Detector:
+        return self.detectors[camera]
+
+    def models(self) -> dict[str, str]:
+        """The model file of each camera, for the start-up log."""
+        return {c: d.model_path.name for c, d in self.detectors.items()}

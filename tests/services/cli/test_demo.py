@@ -1,0 +1,70 @@
+"""``bevflow demo``: what it starts, by default and with its options (services stubbed out)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from bevflow_services import launcher
+from bevflow_services.cli import main
+from bevflow_services.launcher import TEMPORARY_DB
+
+
+class FakeGroup:
+    instances: list[FakeGroup] = []
+
+    def __init__(self, site: str, log_dir: Path) -> None:
+        self.site, self.log_dir, self.children = site, log_dir, []
+        FakeGroup.instances.append(self)
+
+    def dead(self) -> list:
+        return []
+
+    def __enter__(self) -> FakeGroup:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        pass
+
+
+@pytest.fixture
+def started(monkeypatch: pytest.MonkeyPatch) -> list[dict]:
+    calls: list[dict] = []
+
+    def fake_start(group: FakeGroup, port: int, **options: object) -> str:
+        calls.append({"site": group.site, "port": port, **options})
+        return f"http://127.0.0.1:{port}"
+
+    monkeypatch.setattr(launcher, "ServiceGroup", FakeGroup)
+    monkeypatch.setattr(launcher, "start_pipeline", fake_start)
+    return calls
+
+
+def port_pair() -> int:
+    port = launcher.free_port()
+    return port if port < 65535 else port - 1
+
+
+@pytest.mark.parametrize(
+    ("argv", "boxes", "history_db", "ingest_args"),
+    [
+        ([], "rendered", TEMPORARY_DB, ()),
+        (["--boxes", "simulated", "--people", "12"], "simulated", TEMPORARY_DB, ("--people", "12")),
+        (["--no-history-db"], "rendered", None, ()),
+        (["--history-db", "/tmp/x.db"], "rendered", "/tmp/x.db", ()),
+    ],
+)
+def test_the_demo_runs_the_detector_on_rendered_frames_by_default(started: list[dict], tmp_path: Path, argv: list[str],
+                                                                   boxes: str, history_db: str | None, ingest_args: tuple) -> None:
+    port = port_pair()
+    code = main(["demo", "--port", str(port), "--duration", "0", "--log-dir", str(tmp_path), *argv])
+    assert code == 0
+    assert started == [{"site": "demo-hall", "port": port, "boxes": boxes, "history_db": history_db, "ingest_args": ingest_args}]
+
+
+def test_contradicting_history_options_are_refused(started: list[dict], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    code = main(["demo", "--port", str(port_pair()), "--history-db", "x.db", "--no-history-db", "--log-dir", str(tmp_path)])
+    assert code == 2
+    assert "--history-db and --no-history-db" in capsys.readouterr().err
+    assert started == []

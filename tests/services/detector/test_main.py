@@ -1,0 +1,161 @@
+from __future__ import annotations
+
+import importlib.util
+import threading
+
+import cv2
+import numpy as np
+import pytest
+
+from bevflow.detections import Boxes
+from bevflow.schemas import FrameHeader
+from bevflow.sim.bodies import BodyShape
+from bevflow.sim.render_feed import RenderedCameras
+from bevflow.sim.scene import SceneConfig, SceneFrame
+from bevflow.site import parse_site
+
+from bevflow_services import bus
+from bevflow_services.detector.main import BadFrame, FrameDetector, serve
+
+SITE = parse_site("""
+site: hall
+cameras:
+  - {id: a, image_size: [1000, 800], intrinsics: {fx: 300, fy: 300, cx: 499.5, cy: 399.5}, pose: {position: [0, 0, 4.0]}}
+  - {id: b, image_size: [1000, 800], intrinsics: {fx: 300, fy: 300, cx: 499.5, cy: 399.5}, pose: {position: [6, 0, 4.0]}}
+""")
+
+
+class FakeDetector:
+    """Stands in for ``Detector``: one box at fixed frame pixels; remembers its calls."""
+
+    def __init__(self, box: tuple[float, float, float, float] = (10.0, 20.0, 30.0, 60.0)) -> None:
+        self.box = box
+        self.calls: list[tuple[tuple[int, ...], float, float]] = []
+
+    def detect(self, image: np.ndarray, camera_height_m: float, focal_px: float) -> Boxes:
+        self.calls.append((image.shape, camera_height_m, focal_px))
+        return Boxes(xyxy=np.array([self.box]), confidence=np.array([0.8]))
+
+
+def header(camera: str = "a", width: int = 1000, height: int = 800, encoding: str = "bgr8", seq: int = 5) -> FrameHeader:
+    return FrameHeader(camera=camera, seq=seq, capture_ns=123_456, width=width, height=height, encoding=encoding)
+
+
+@pytest.mark.parametrize("scale", [1.0, 0.5, 0.25])
+def test_boxes_come_back_in_the_calibrated_pixels_whatever_the_frame_size(scale: float) -> None:
+    fake = FakeDetector()
+    w, h = int(1000 * scale), int(800 * scale)
+    message = FrameDetector(SITE, {"a": fake}).detect(header(width=w, height=h), np.zeros((h, w, 3), np.uint8))
+    assert (message.camera, message.seq, message.capture_ns) == ("a", 5, 123_456)
+    expected = (np.array([10.0, 20.0, 30.0, 60.0]) + 0.5) / scale - 0.5
+    np.testing.assert_allclose(message.boxes[0], expected)
+    assert message.confidence == [pytest.approx(0.8)]
+    # The detector is told the frame's own focal length, so it scales it the right amount.
+    assert fake.calls == [((h, w, 3), pytest.approx(4.0), pytest.approx(300 * scale))]
+
+
+def test_jpeg_and_grey_frames_are_detected_in_colour() -> None:
+    fake = FakeDetector()
+    worker = FrameDetector(SITE, {"a": fake})
+    image = np.full((400, 500, 3), 90, np.uint8)
+    ok, jpeg = cv2.imencode(".jpg", image)
+    assert ok
+    worker.detect(header(width=500, height=400, encoding="jpeg"), jpeg.ravel())
+    worker.detect(header(width=500, height=400, encoding="gray8"), np.zeros((400, 500), np.uint8))
+    assert [c[0] for c in fake.calls] == [(400, 500, 3), (400, 500, 3)]
+
+
+@pytest.mark.parametrize(
+    ("frame_header", "image", "reason"),
+    [
+        (header(camera="zz"), np.zeros((800, 1000, 3), np.uint8), "unknown_camera"),
+        (header(width=1000, height=500), np.zeros((500, 1000, 3), np.uint8), "frame_size"),
+        (header(width=64, height=64, encoding="jpeg"), np.frombuffer(b"not a jpeg", np.uint8), "undecodable"),
+        (header(width=500, height=400, encoding="jpeg"), cv2.imencode(".jpg", np.zeros((40, 50, 3), np.uint8))[1].ravel(),
+         "frame_size"),
+    ],
+)
+def test_frames_that_do_not_fit_their_camera_are_refused(frame_header: FrameHeader, image: np.ndarray, reason: str) -> None:
+    fake = FakeDetector()
+    with pytest.raises(BadFrame) as raised:
+        FrameDetector(SITE, {"a": fake}).detect(frame_header, image)
+    assert raised.value.reason == reason
+    assert fake.calls == []
+
+
+class FakeInbox:
+    def __init__(self, key: str, frames: list[bus.Frame]) -> None:
+        self.key = key
+        self.frames = frames
+
+    def take(self, timeout: float | None = None) -> bus.Frame | None:
+        return self.frames.pop(0) if self.frames else None
+
+
+class FakePublication:
+    def __init__(self) -> None:
+        self.sent: list = []
+
+    def put(self, message) -> None:  # noqa: ANN001
+        self.sent.append(message)
+
+
+class ExplodingDetector(FakeDetector):
+    def detect(self, image: np.ndarray, camera_height_m: float, focal_px: float) -> Boxes:
+        raise RuntimeError("a bug")
+
+
+def test_the_loop_skips_bad_frames_and_bugs_and_goes_on_with_the_other_cameras() -> None:
+    frame = np.zeros((400, 500, 3), np.uint8)
+    inboxes = {
+        "a": FakeInbox("k/a", [bus.Frame(header("a", 500, 400, seq=1), frame), bus.Frame(header("b", 500, 400, seq=2), frame),
+                               bus.Frame(header("a", 500, 100, seq=3), np.zeros((100, 500, 3), np.uint8)),
+                               bus.Frame(header("a", 500, 400, seq=4), frame)]),
+        "b": FakeInbox("k/b", [bus.Frame(header("b", 500, 400, seq=9), frame)]),
+    }
+    publications = {"a": FakePublication(), "b": FakePublication()}
+    stats = bus.BusStats()
+    stop, wake = threading.Event(), threading.Event()
+    wake.set()
+    worker = FrameDetector(SITE, {"a": FakeDetector(), "b": ExplodingDetector()})
+    thread = threading.Thread(target=serve, args=(inboxes, publications, worker, stats, stop, wake))
+    thread.start()
+    for _ in range(50):
+        wake.set()
+        if not any(i.frames for i in inboxes.values()):
+            break
+        threading.Event().wait(0.01)
+    stop.set()
+    thread.join(5)
+    assert not thread.is_alive()
+    assert [m.seq for m in publications["a"].sent] == [1, 4]
+    assert publications["b"].sent == []
+    assert stats.rejected == {"wrong_camera": 1, "frame_size": 1}
+    assert stats.handler_errors == 1
+
+
+@pytest.mark.skipif(importlib.util.find_spec("onnxruntime") is None, reason="onnxruntime is not installed")
+def test_the_shipped_model_finds_a_rendered_person_where_the_camera_sees_them() -> None:
+    from bevflow.detect.runtime import Detector
+
+    site = parse_site("""
+site: one
+cameras:
+  - {id: c, image_size: [1280, 1280], intrinsics: {fx: 400, fy: 400, cx: 639.5, cy: 639.5}, pose: {position: [0, 0, 3.5]}}
+""")
+    feet = [(1.0, 0.5), (-1.2, -1.0)]
+    n = len(feet)
+    frame = SceneFrame(index=3, time_s=0.3, person_ids=np.arange(1, n + 1), identity=np.arange(n), group=np.full(n, -1),
+                       feet_xy=np.array(feet), heading=np.zeros(n), gait_phase=np.zeros(n), speed=np.zeros(n),
+                       posture=np.zeros(n, dtype=np.int64), body=BodyShape.standard(n))  # fmt: skip
+    cams = RenderedCameras(site, SceneConfig(floor=(-5.0, -5.0, 5.0, 5.0), people=0, frames=1))
+    image = cams.render("c", frame).image
+    h, w = image.shape[:2]
+    message = FrameDetector(site, {"c": Detector(threads=1)}).detect(header("c", w, h, seq=3), image)
+    boxes = np.array(message.boxes)
+    assert len(boxes) == n
+    for x, y in feet:
+        head = site.camera("c").project(np.array([[x, y, 1.6]]))[0]
+        near_x = (boxes[:, 0] - 5 <= head[0]) & (head[0] <= boxes[:, 2] + 5)
+        inside = near_x & (boxes[:, 1] - 5 <= head[1]) & (head[1] <= boxes[:, 3] + 5)
+        assert inside.any(), (head, boxes)

@@ -1,0 +1,112 @@
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from bevflow.detect.runtime import DEFAULT_MODEL, DetectorError, HeightRange
+from bevflow.site import parse_site
+
+from bevflow_services.detector.models import CameraModels, resolve_model, shipped_model_names
+
+SITE = """
+site: hall
+cameras:
+  - {id: low, image_size: [800, 800], intrinsics: {fx: 250, fy: 250, cx: 399.5, cy: 399.5}, pose: {position: [0, 0, 3.5]}}
+  - {id: high, image_size: [800, 800], intrinsics: {fx: 250, fy: 250, cx: 399.5, cy: 399.5}, pose: {position: [5, 0, 8.0]}}
+  - {id: own, image_size: [800, 800], intrinsics: {fx: 250, fy: 250, cx: 399.5, cy: 399.5}, pose: {position: [9, 0, 4.0]}, detector: %s}
+"""
+
+
+class FakeDetector:
+    """Stands in for ``Detector``: remembers what it was built with."""
+
+    def __init__(self, path: Path, threads: int, **options: object) -> None:
+        self.model_path, self.threads, self.options = Path(path), threads, options
+
+
+def test_the_shipped_model_is_found_by_name() -> None:
+    assert DEFAULT_MODEL.stem in shipped_model_names()
+    assert resolve_model(DEFAULT_MODEL.stem) == DEFAULT_MODEL
+    assert resolve_model(DEFAULT_MODEL.name) == DEFAULT_MODEL
+
+
+@pytest.mark.parametrize("relative", [True, False])
+def test_a_model_file_is_found_by_path_or_next_to_the_site_file(tmp_path: Path, relative: bool) -> None:
+    model = tmp_path / "models" / "mine.onnx"
+    model.parent.mkdir()
+    model.write_bytes(b"onnx")
+    name = "models/mine.onnx" if relative else str(model)
+    assert resolve_model(name, site_dir=tmp_path) == model
+
+
+def test_an_unknown_model_names_the_shipped_ones(tmp_path: Path) -> None:
+    with pytest.raises(DetectorError, match=f"'nope'.*shipped: .*{DEFAULT_MODEL.stem}"):
+        resolve_model("nope", site_dir=tmp_path)
+
+
+def test_cameras_get_their_own_model_or_the_one_for_their_height(tmp_path: Path) -> None:
+    own = tmp_path / "own.onnx"
+    own.write_bytes(b"onnx")
+    site = parse_site(SITE % "own.onnx")
+    models = CameraModels(site, site_dir=tmp_path, threads=3, score_threshold=0.6, load=FakeDetector)
+    assert models["own"].model_path == own.resolve()
+    assert models["own"].threads == 3 and models["own"].options == {"score_threshold": 0.6}
+    # Cameras naming no model: the height ranges (by default the shipped model for every height).
+    assert models["low"].model_path == DEFAULT_MODEL and models["low"] is models["high"]
+    assert models.models() == {"low": DEFAULT_MODEL.name, "high": DEFAULT_MODEL.name, "own": "own.onnx"}
+
+
+def test_cameras_naming_the_same_file_share_one_loaded_model(tmp_path: Path) -> None:
+    model = tmp_path / "m.onnx"
+    model.write_bytes(b"onnx")
+    site = parse_site(SITE % "m.onnx")
+    models = CameraModels(site, site_dir=tmp_path, default=str(model), load=FakeDetector)
+    assert models["low"] is models["high"] is models["own"]
+
+
+def test_only_the_served_cameras_load_and_a_bad_name_fails_at_start_up(tmp_path: Path) -> None:
+    site = parse_site(SITE % "missing-model")
+    models = CameraModels(site, ["low"], site_dir=tmp_path, load=FakeDetector)
+    assert list(models.detectors) == ["low"]
+    with pytest.raises(DetectorError, match="missing-model"):
+        CameraModels(site, site_dir=tmp_path, load=FakeDetector)
+
+
+def test_height_ranges_choose_the_model_of_cameras_that_name_none(tmp_path: Path) -> None:
+    low, high = tmp_path / "low.onnx", tmp_path / "high.onnx"
+    low.write_bytes(b"onnx")
+    high.write_bytes(b"onnx")
+    site = parse_site(SITE % "null")
+    ranges = [HeightRange(6.0, 10.0, high), HeightRange(3.0, 6.0, low)]
+    models = CameraModels(site, ranges=ranges, load=FakeDetector)
+    assert models.models() == {"low": "low.onnx", "high": "high.onnx", "own": "low.onnx"}
+    with pytest.raises(DetectorError, match="no detector model covers a camera 8.00 m high"):
+        CameraModels(site, ranges=[HeightRange(3.0, 6.0, low)], load=FakeDetector)
+
+
+def test_the_site_files_height_table_chooses_by_height(tmp_path: Path) -> None:
+    for name in ("low.onnx", "high.onnx"):
+        (tmp_path / name).write_bytes(b"onnx")
+    text = (SITE % "null") + """
+detectors:
+  - {min_height_m: 3, max_height_m: 6, model: low.onnx}
+  - {min_height_m: 6, max_height_m: 10, model: high.onnx}
+"""
+    models = CameraModels(parse_site(text), site_dir=tmp_path, load=FakeDetector)
+    assert models.models() == {"low": "low.onnx", "high": "high.onnx", "own": "low.onnx"}
+
+
+@pytest.mark.parametrize(
+    ("table", "message"),
+    [
+        ("[{min_height_m: 3, max_height_m: 7, model: a}, {min_height_m: 6, max_height_m: 10, model: b}]", "overlap"),
+        ("[{min_height_m: 6, max_height_m: 6, model: a}]", "must be below"),
+        ("[{max_height_m: 6}]", "model"),
+    ],
+)
+def test_bad_height_tables_are_refused_when_the_site_is_read(table: str, message: str) -> None:
+    from bevflow.site import SiteError
+
+    with pytest.raises(SiteError, match=message):
+        parse_site((SITE % "null") + f"detectors: {table}\n")

@@ -1,0 +1,99 @@
+"""The ingest's simulation modes: rendered frames in step across cameras, with ground truth."""
+
+from __future__ import annotations
+
+import argparse
+import threading
+import time
+
+import pytest
+
+from bevflow.schemas import SimulatedTruth
+from bevflow.sim.render_feed import detector_frame_size
+from bevflow.site import parse_site
+
+from bevflow_services import bus
+from bevflow_services.cli import UserError
+from bevflow_services.cli.serve import service_parser
+from bevflow_services.ingest import main as ingest
+from bevflow_services.launcher import free_port
+
+SITE = parse_site("""
+site: ingest-test
+floor: [-4, -4, 10, 4]
+cameras:
+  - {id: a, image_size: [800, 800], intrinsics: {fx: 250, fy: 250, cx: 399.5, cy: 399.5}, pose: {position: [0, 0, 3.5]}}
+  - {id: b, image_size: [800, 800], intrinsics: {fx: 250, fy: 250, cx: 399.5, cy: 399.5}, pose: {position: [6, 0, 3.5]}}
+""")
+
+
+def args_for(*argv: str) -> argparse.Namespace:
+    return service_parser("ingest", ingest).parse_args(["--site", "demo-hall", *argv])
+
+
+def test_render_needs_the_simulation() -> None:
+    with pytest.raises(UserError, match="--render.*--simulate"):
+        ingest.main(args_for("--render"))
+
+
+def test_rendered_frames_come_in_step_with_the_ground_truth() -> None:
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    publisher = bus.open_session(bus.BusConfig(listen=(endpoint,)))
+    listener = bus.open_session(bus.BusConfig(connect=(endpoint,)))
+    keys = bus.Keys(f"ingest-{time.monotonic_ns()}")
+    frames: list[bus.Frame] = []
+    truths: list[SimulatedTruth] = []
+    lock = threading.Lock()
+
+    def keep(into: list):  # noqa: ANN202
+        def on(message) -> None:  # noqa: ANN001
+            with lock:
+                into.append(message)
+        return on
+
+    subs = [bus.subscribe(listener, keys.frame("*"), bus.FRAMES, keep(frames)),
+            bus.subscribe(listener, keys.truth, bus.JsonCodec(SimulatedTruth), keep(truths))]
+    stop = threading.Event()
+    worker = threading.Thread(target=ingest.simulate_frames,
+                              args=(publisher, keys, SITE, ["a", "b"], args_for("--simulate", "--render", "--people", "4"), stop))
+    try:
+        time.sleep(0.3)  # let the subscriptions reach the publisher
+        worker.start()
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline:
+            with lock:
+                if len(truths) >= 6:
+                    break
+            time.sleep(0.05)
+    finally:
+        stop.set()
+        worker.join(10)
+        for sub in subs:
+            sub.close()
+        listener.close()
+        publisher.close()
+    assert not worker.is_alive()
+    with lock:
+        assert len(truths) >= 6
+        by_capture: dict[int, dict[str, bus.Frame]] = {}
+        for frame in frames:
+            by_capture.setdefault(frame.header.capture_ns, {})[frame.header.camera] = frame
+    for camera in ("a", "b"):
+        w, h = detector_frame_size(SITE, camera)
+        shots = [f for f in frames if f.header.camera == camera]
+        assert shots and all(f.image.shape == (h, w, 3) and (f.header.width, f.header.height) == (w, h) for f in shots)
+        seqs = [f.header.seq for f in shots]
+        assert seqs == sorted(seqs) and len(set(seqs)) == len(seqs)
+    # Both cameras show the same instant: same capture time, same sequence number, and that
+    # instant's ground truth was published with it.
+    truth_at = {t.capture_ns: t for t in truths}
+    both = [shots for shots in by_capture.values() if len(shots) == 2]
+    assert len(both) >= 3
+    for shots in both:
+        assert shots["a"].header.seq == shots["b"].header.seq
+        assert truth_at[shots["a"].header.capture_ns].frame == shots["a"].header.seq
+    # People are on the floor and the frames show them walking (the static scene alone would
+    # render the same picture every time).
+    assert max(len(t.tracks) for t in truths) > 0
+    shots = sorted((f for f in frames if f.header.camera == "a"), key=lambda f: f.header.seq)
+    assert (shots[0].image != shots[-1].image).any(axis=2).sum() > 20

@@ -1,0 +1,53 @@
+"""Which services ``start_pipeline`` starts, in which order and with which flags (no processes)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from bevflow_services.launcher import start_pipeline
+
+
+class FakeGroup:
+    def __init__(self, log_dir: Path) -> None:
+        self.log_dir = log_dir
+        self.started: list[tuple[str, tuple[str, ...]]] = []
+        self.waited: list[str] = []
+
+    def start(self, service: str, *extra: str, name: str | None = None) -> None:
+        self.started.append((service, extra))
+
+    def wait_http(self, url: str, timeout_s: float = 30.0) -> None:
+        self.waited.append(url)
+
+
+@pytest.mark.parametrize(
+    ("options", "expected"),
+    [
+        ({}, [("tracker", ("--max-wait-ms", "400")), ("projector", ()), ("recorder", ("--db", "{log}/history.db")),
+              ("gateway", ("--port", "8123", "--db", "{log}/history.db", "--auth", "off")), ("detector", ()), ("ingest", ("--simulate", "--render"))]),
+        ({"boxes": "simulated", "history_db": None},
+         [("tracker", ()), ("projector", ()), ("gateway", ("--port", "8123", "--auth", "off")), ("ingest", ("--simulate",))]),
+        ({"history_db": "/data/h.db", "detector_args": ("--threads", "1"), "ingest_args": ("--people", "5"),
+          "gateway_args": ("--no-view3d", "--auth", "on"), "tracker_args": ("--tick-ms", "200")},
+         [("tracker", ("--tick-ms", "200")), ("projector", ()), ("recorder", ("--db", "/data/h.db")),
+          ("gateway", ("--port", "8123", "--db", "/data/h.db", "--no-view3d", "--auth", "on")), ("detector", ("--threads", "1")),
+          ("ingest", ("--simulate", "--render", "--people", "5"))]),
+    ],
+)
+def test_the_pipeline_starts_what_was_asked_for(tmp_path: Path, options: dict, expected: list) -> None:
+    group = FakeGroup(tmp_path)
+    base = start_pipeline(group, 8123, **options)  # type: ignore[arg-type]
+    assert base == "http://127.0.0.1:8123"
+    assert group.waited == ["http://127.0.0.1:8123/api/health"]
+    fill = [(s, tuple(a.replace("{log}", str(tmp_path)) for a in args)) for s, args in expected]
+    assert group.started == fill
+    # The ingest comes last, once everything that consumes its frames is up.
+    assert group.started[-1][0] == "ingest"
+
+
+def test_an_unknown_box_source_is_refused(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="boxes must be one of rendered, simulated"):
+        start_pipeline(FakeGroup(tmp_path), 8000, boxes="real")
+
