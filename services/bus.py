@@ -1,7 +1,8 @@
 """The message bus: the one module that talks to Zenoh.
 
 Everything a service needs to move bevflow's messages between processes lives here: how a session is
-configured (``BusConfig``, ``add_bus_arguments``), where each message goes (``Keys``), how it is
+configured (``BusConfig``, ``add_bus_arguments``; TLS and passwords from the site file's ``bus:``
+section, ``Security``), where each message goes (``Keys``), how it is
 encoded (JSON for :mod:`bevflow.schemas` messages, raw pixels plus a JSON header for frames), how
 received samples reach the code that wants them, and which services are up (liveliness).
 
@@ -33,12 +34,13 @@ import asyncio
 import collections
 import json
 import logging
+import math
 import os
 import re
 import socket
 import threading
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Generic, Literal, Protocol, TypeVar
@@ -49,6 +51,7 @@ import zenoh.ext
 from pydantic import TypeAdapter, ValidationError
 
 from bevflow.schemas import SCHEMA_VERSION, FrameHeader
+from bevflow.site import BusSecurity, SiteError, load_site_or_builtin
 
 log = logging.getLogger(__name__)
 
@@ -65,6 +68,86 @@ class BusError(Exception):
 
 
 @dataclass(frozen=True)
+class Security:
+    """TLS files and credentials for a session, from the site file's ``bus:`` section
+    (:class:`bevflow.site.BusSecurity`) with the password already read from its file or variable."""
+
+    root_ca: Path | None = None
+    cert: Path | None = None
+    key: Path | None = None
+    mutual: bool = False
+    user: str | None = None
+    password: str | None = field(default=None, repr=False)
+    users_file: Path | None = None
+
+    @property
+    def tls(self) -> bool:
+        return self.root_ca is not None or self.cert is not None
+
+    @classmethod
+    def from_site(cls, section: BusSecurity | None, environ: Mapping[str, str] = os.environ) -> Security | None:
+        """Check that every file named exists and read the password; ``BusError`` otherwise."""
+        if section is None or (section.tls is None and section.auth is None):
+            return None
+        tls, auth = section.tls, section.auth
+        return cls(
+            root_ca=_readable(tls and tls.root_ca, "bus.tls.root_ca"),
+            cert=_readable(tls and tls.cert, "bus.tls.cert"),
+            key=_readable(tls and tls.key, "bus.tls.key"),
+            mutual=bool(tls and tls.mutual),
+            user=auth.user if auth else None,
+            password=_password(auth.password_file, auth.password_env, environ) if auth and auth.user else None,
+            users_file=_readable(auth and auth.users_file, "bus.auth.users_file"),
+        )
+
+    def apply(self, conf: zenoh.Config) -> None:
+        tls = "transport/link/tls/"
+        for key, value in ((tls + "root_ca_certificate", self.root_ca), (tls + "listen_certificate", self.cert),
+                           (tls + "listen_private_key", self.key)):
+            if value is not None:
+                conf.insert_json5(key, json.dumps(str(value)))
+        if self.mutual:
+            conf.insert_json5(tls + "enable_mtls", "true")
+            conf.insert_json5(tls + "connect_certificate", json.dumps(str(self.cert)))
+            conf.insert_json5(tls + "connect_private_key", json.dumps(str(self.key)))
+        if self.user is not None:
+            conf.insert_json5("transport/auth/usrpwd/user", json.dumps(self.user))
+            conf.insert_json5("transport/auth/usrpwd/password", json.dumps(self.password))
+        if self.users_file is not None:
+            conf.insert_json5("transport/auth/usrpwd/dictionary_file", json.dumps(str(self.users_file)))
+
+
+def _readable(path: str | None, what: str) -> Path | None:
+    if not path:
+        return None
+    resolved = Path(path).expanduser()
+    try:
+        with resolved.open("rb"):
+            pass
+    except OSError as exc:
+        raise BusError(f"{what}: cannot read {path} ({exc.strerror or exc})") from None
+    return resolved
+
+
+def _password(path: str | None, variable: str | None, environ: Mapping[str, str]) -> str:
+    if variable is not None:
+        if not environ.get(variable):
+            raise BusError(f"bus.auth.password_env: the environment variable {variable} is not set")
+        return environ[variable]
+    assert path is not None  # the site model requires one of them
+    file = _readable(path, "bus.auth.password_file")
+    assert file is not None
+    password = file.read_text(encoding="utf-8").rstrip("\r\n")
+    if not password:
+        raise BusError(f"bus.auth.password_file: {path} is empty")
+    return password
+
+
+_LOOPBACK = re.compile(r"[a-z0-9]+/(127\.\d+\.\d+\.\d+|localhost|\[::1\])(:\d+)?([#?].*)?")
+_ENCRYPTED = ("tls/", "quic/", "unixsock-stream/")
+
+
+@dataclass(frozen=True)
 class BusConfig:
     """How a process joins the bus. Multicast scouting is off by default: deployments name their
     endpoints, and tests on one machine must not find each other by accident."""
@@ -78,6 +161,7 @@ class BusConfig:
     shm_pool_bytes: int = 64 * MiB
     timestamping: bool = False
     zenoh_config_file: Path | None = None
+    security: Security | None = None
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
@@ -87,6 +171,14 @@ class BusConfig:
         for endpoint in (*self.connect, *self.listen):
             if not re.fullmatch(r"[a-z0-9]+/\S+", endpoint):
                 raise BusError(f"endpoint {endpoint!r} is not of the form PROTOCOL/ADDRESS, e.g. tcp/127.0.0.1:7447")
+        if self.security is not None and self.security.tls:
+            # With TLS configured, plain links may stay only on this host (a local demo, a
+            # sidecar); anything that crosses the network must be encrypted.
+            for endpoint in (*self.connect, *self.listen):
+                if not endpoint.startswith(_ENCRYPTED) and not _LOOPBACK.fullmatch(endpoint):
+                    address = endpoint.split("/", 1)[1]
+                    raise BusError(f"the site's bus.tls is set, but endpoint {endpoint} is not encrypted: "
+                                   f"use tls/{address}")
 
     def to_zenoh(self) -> zenoh.Config:
         """The Zenoh configuration: the optional file first, then these settings on top."""
@@ -101,6 +193,11 @@ class BusConfig:
         conf.insert_json5("transport/shared_memory/transport_optimization/pool_size", str(self.shm_pool_bytes))
         if self.timestamping:
             conf.insert_json5("timestamping/enabled", "true")
+        if self.security is not None:
+            self.security.apply(conf)
+            if self.security.tls and self.mode == "peer" and not self.listen:
+                # A peer's default listener is plain TCP on every interface; with TLS, none.
+                conf.insert_json5("listen/endpoints", "[]")
         return conf
 
 
@@ -137,7 +234,9 @@ def add_bus_arguments(parser: argparse.ArgumentParser, *, mode: bool = True) -> 
 
 
 def config_from_args(args: argparse.Namespace, *, mode: Mode | None = None) -> BusConfig:
-    """The ``BusConfig`` named by the flags of ``add_bus_arguments``; ``mode`` overrides --mode."""
+    """The ``BusConfig`` named by the flags of ``add_bus_arguments``; ``mode`` overrides --mode.
+    With ``args.site`` (a site file or built-in name), its ``bus:`` section adds TLS and
+    credentials; a site that does not load is left for the service to report."""
     return BusConfig(
         mode=mode or getattr(args, "mode", "peer"),
         connect=tuple(args.connect),
@@ -145,7 +244,36 @@ def config_from_args(args: argparse.Namespace, *, mode: Mode | None = None) -> B
         multicast_scouting=args.multicast_scouting,
         shared_memory=args.shared_memory,
         zenoh_config_file=args.zenoh_config,
+        security=_readable_site_security(getattr(args, "site", None)),
     )
+
+
+def _readable_site_security(site: str | Path | None) -> Security | None:
+    try:
+        return site_security(site)
+    except BusError:
+        if site is not None and not _site_loads(site):
+            return None  # not this module's error to report: the service says what is wrong with its site
+        raise
+
+
+def _site_loads(site: str | Path) -> bool:
+    try:
+        load_site_or_builtin(site)
+    except SiteError:
+        return False
+    return True
+
+
+def site_security(site: str | Path | None) -> Security | None:
+    """The bus security of a site file (or built-in site name); None without a ``bus:`` section."""
+    if site is None:
+        return None
+    try:
+        section = load_site_or_builtin(site).bus
+    except SiteError as exc:
+        raise BusError(str(exc)) from None
+    return Security.from_site(section)
 
 
 # --- the key space -------------------------------------------------------------------------------
@@ -361,7 +489,8 @@ class FrameCodec:
             raise Rejected("no_header", "a frame arrived without its FrameHeader attachment")
         header = _validate_json(_HEADER, attachment)
         shape = _pixel_shape(header)
-        expected = int(np.prod(shape)) if shape else None
+        # Python integers: a forged header's width x height must not wrap around in 64 bits.
+        expected = math.prod(shape) if shape else None
         if (expected is not None and len(payload) != expected) or not payload:
             size = f"{header.encoding} {header.width}x{header.height}"
             raise Rejected("frame_size", f"{len(payload)} bytes for a {size} frame")

@@ -129,7 +129,8 @@ def start_pipeline(group: ServiceGroup, port: int, *, boxes: str = "rendered", h
         raise ValueError(f"boxes must be one of {', '.join(BOXES)}, got {boxes!r}")
     if tracker_args is None:
         tracker_args = ("--max-wait-ms", str(DETECTOR_MAX_WAIT_MS)) if boxes == "rendered" else ()
-    group.start("tracker", *tracker_args)
+    # The id file lets a tracker restarted by hand (or by the chaos test) continue past old ids.
+    group.start("tracker", "--id-file", str(group.log_dir / "tracker-next-id"), *tracker_args)
     group.start("projector")
     db_args: tuple[str, ...] = ()
     if history_db is not None:

@@ -3,6 +3,9 @@
 No ``zenohd`` binary is packaged for Python, and none is needed: a session opened in router mode
 routes for every client-mode session that connects to it. Services then run with
 ``--mode client --connect tcp/ROUTER_HOST:7447``.
+
+With ``--site``, the router takes TLS and passwords from the site file's ``bus:`` section, like
+the services of that site do, and listens on ``tls/0.0.0.0:7447`` by default.
 """
 
 from __future__ import annotations
@@ -14,18 +17,25 @@ from bevflow_services import bus
 from bevflow_services.cli.serve import stop_on_signals
 
 DEFAULT_LISTEN = "tcp/0.0.0.0:7447"
+DEFAULT_TLS_LISTEN = "tls/0.0.0.0:7447"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.epilog = f"Without --listen the router listens on {DEFAULT_LISTEN}."
+    parser.add_argument("--site", default=None,
+                        help="a site file (or built-in site name) whose 'bus:' section sets TLS and passwords")
+    parser.epilog = (f"Without --listen the router listens on {DEFAULT_LISTEN}, "
+                     f"or {DEFAULT_TLS_LISTEN} when the site sets bus.tls.")
 
 
 def main(args: argparse.Namespace) -> int:
     """Route until SIGINT or SIGTERM. With ``args.site_id`` set, announce the router's liveliness
     in that site so the gateway lists it among the live services."""
+    if getattr(args, "site", None) is not None:
+        bus.site_security(args.site)  # the router has no other use for the site: report its errors here
     cfg = bus.config_from_args(args, mode="router")
     if not cfg.listen:
-        cfg = replace(cfg, listen=(DEFAULT_LISTEN,))
+        secure = cfg.security is not None and cfg.security.tls
+        cfg = replace(cfg, listen=(DEFAULT_TLS_LISTEN if secure else DEFAULT_LISTEN,))
     session = bus.open_session(cfg)
     try:
         with stop_on_signals() as stop:

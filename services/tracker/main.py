@@ -19,6 +19,7 @@ import dataclasses
 import logging
 import threading
 import time
+from pathlib import Path
 
 from bevflow.calibration.drift import DriftConfig
 from bevflow.live.assembler import TickAssembler
@@ -29,6 +30,7 @@ from bevflow_services import bus
 from bevflow_services.cli import UserError
 from bevflow_services.cli.serve import service_site, stop_on_signals
 from bevflow_services.tracker.ticks import TickHandler
+from bevflow_services.tracker.track_ids import TrackIdError, TrackIdReservation
 
 log = logging.getLogger(__name__)
 SERVICE = "tracker"
@@ -45,7 +47,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--event-cache", type=int, default=10000,
                        help="recent alerts kept for a history recorder that restarts (default 10000)")
     group.add_argument("--first-id", type=int, default=1,
-                       help="first track id (give the last run's next id to never reuse an id)")
+                       help="lowest track id to hand out (default 1)")
+    group.add_argument("--id-file", type=Path, default=None,
+                       help="file that reserves track ids across restarts, so a restarted tracker never reuses an id "
+                       "(default: none, ids start again at --first-id)")
     drift = DriftConfig()
     group.add_argument("--no-drift", action="store_true",
                        help="do not watch for cameras that have moved since calibration (calibration_drift alerts)")
@@ -96,10 +101,24 @@ class CameraWatch:
         return events
 
 
+def reserve_ids(reservation: TrackIdReservation, next_id: int) -> None:
+    """Reserve ids before any new one leaves the process. If the disk fails, tracking goes on (a
+    site without tracks is worse) and the log says that a restart may now reuse ids."""
+    try:
+        reservation.cover(next_id)
+    except TrackIdError as exc:
+        log.error("%s; a restarted tracker may reuse track ids until this is fixed", exc)
+
+
 def main(args: argparse.Namespace) -> int:
     site, site_id = service_site(args)
     keys = bus.Keys(site_id)
-    tracker = SiteTracker(site, first_id=args.first_id)
+    reservation = TrackIdReservation(args.id_file) if args.id_file else None
+    try:
+        first_id = reservation.first_id(args.first_id) if reservation else args.first_id
+    except TrackIdError as exc:
+        raise UserError(str(exc)) from None
+    tracker = SiteTracker(site, first_id=first_id)
     handler = TickHandler(site, tracker, drift_config(args))
     assembler: TickAssembler[CameraCylinders] = TickAssembler(
         site.camera_ids, period_ns=int(args.tick_ms * 1e6), max_wait_ns=int(args.max_wait_ms * 1e6))
@@ -143,6 +162,8 @@ def main(args: argparse.Namespace) -> int:
                         stats.count("handler_errors")
                         log.exception("tracking failed at tick %d; skipping it", tick.time_ns)
                         continue
+                    if reservation:
+                        reserve_ids(reservation, tracker.tracker.next_id)
                     tracks_out.put(output.tracks)
                     occupancy_out.put(output.occupancy)
                     for event in output.events:

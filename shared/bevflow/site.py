@@ -156,6 +156,81 @@ class Thresholds(_Strict):
     track_gate_m: PositiveFloat = 1.5
 
 
+class BusTls(_Strict):
+    """TLS for the message bus between hosts. Paths to PEM files on each host (relative paths
+    are taken from the working directory of the service). ``cert`` and ``key`` are this host's
+    certificate, needed where a service or router listens (and on clients with ``mutual``);
+    ``root_ca`` is the authority that signed the certificates of the hosts this one connects to."""
+
+    root_ca: str | None = None
+    cert: str | None = None
+    key: str | None = None
+    mutual: bool = Field(default=False, description="also require clients to show a certificate signed by root_ca")
+
+    @model_validator(mode="after")
+    def _cert_with_key(self) -> BusTls:
+        if (self.cert is None) != (self.key is None):
+            raise ValueError("give 'cert' and 'key' together (this host's certificate and its private key)")
+        if self.root_ca is None and self.cert is None:
+            raise ValueError("give 'root_ca' (to check the router) and/or 'cert' and 'key' (to listen)")
+        if self.mutual and (self.root_ca is None or self.cert is None):
+            raise ValueError("'mutual' needs 'root_ca', 'cert' and 'key'")
+        return self
+
+
+class BusAuth(_Strict):
+    """User name and password on the message bus. The password itself never goes in the site
+    file: ``password_file`` names a file holding it, ``password_env`` an environment variable.
+    A router checks clients against ``users_file``, lines of ``user:password``."""
+
+    user: Annotated[str, Field(min_length=1, pattern=r"^[A-Za-z0-9_.-]+$")] | None = None
+    password_file: str | None = None
+    password_env: Annotated[str, Field(min_length=1)] | None = None
+    users_file: str | None = None
+
+    @model_validator(mode="before")
+    @classmethod
+    def _no_plaintext_password(cls, raw: Any) -> Any:
+        if isinstance(raw, dict) and "password" in raw:
+            raise ValueError("never write the password in the site file: put it in a file ('password_file') "
+                             "or an environment variable ('password_env')")
+        return raw
+
+    @model_validator(mode="after")
+    def _user_with_password(self) -> BusAuth:
+        sources = (self.password_file is not None) + (self.password_env is not None)
+        if self.user is not None and sources != 1:
+            raise ValueError("give the user's password as exactly one of 'password_file' or 'password_env'")
+        if self.user is None and sources:
+            raise ValueError("a password without a 'user'")
+        if self.user is None and self.users_file is None:
+            raise ValueError("give 'user' (and its password) to log in, and/or 'users_file' to check others")
+        return self
+
+
+class BusSecurity(_Strict):
+    """How the hosts of a site secure the message bus (Zenoh) between them."""
+
+    tls: BusTls | None = None
+    auth: BusAuth | None = None
+
+
+class DetectorRange(_Strict):
+    """Cameras mounted from ``min_height_m`` (inclusive) to ``max_height_m`` (exclusive) that name
+    no ``detector`` of their own use ``model``: an ONNX file (relative to the site file) or the
+    name of a model shipped with bevflow."""
+
+    min_height_m: Annotated[float, Field(ge=0)] = 0.0
+    max_height_m: PositiveFloat
+    model: Annotated[str, Field(min_length=1)]
+
+    @model_validator(mode="after")
+    def _not_empty(self) -> DetectorRange:
+        if not self.min_height_m < self.max_height_m:
+            raise ValueError(f"min_height_m {self.min_height_m} must be below max_height_m {self.max_height_m}")
+        return self
+
+
 class Site(_Strict):
     site: Annotated[str, Field(min_length=1, pattern=r"^[A-Za-z0-9_.-]+$")] = "site"
     cameras: Annotated[list[CameraConfig], Field(min_length=1)]
@@ -164,6 +239,20 @@ class Site(_Strict):
     floor: tuple[float, float, float, float] | None = Field(
         default=None, description="floor extent (xmin, ymin, xmax, ymax) in metres, for maps"
     )
+    bus: BusSecurity | None = Field(default=None, description="TLS and passwords on the message bus between hosts")
+    detectors: list[DetectorRange] | None = Field(
+        default=None, description="detector model by mounting height; default: the shipped model for every height"
+    )
+
+    @field_validator("detectors")
+    @classmethod
+    def _ranges_do_not_overlap(cls, ranges: list[DetectorRange] | None) -> list[DetectorRange] | None:
+        ordered = sorted(ranges or [], key=lambda r: r.min_height_m)
+        for a, b in zip(ordered, ordered[1:], strict=False):
+            if b.min_height_m < a.max_height_m:
+                raise ValueError(f"detector height ranges overlap: [{a.min_height_m:g}, {a.max_height_m:g}) "
+                                 f"and [{b.min_height_m:g}, {b.max_height_m:g})")
+        return ranges
 
     @field_validator("cameras", "zones")
     @classmethod
@@ -302,7 +391,10 @@ def _describe(source: str, raw: dict[str, Any], err: Any) -> str:
             parts.append(label)
             node = item
         else:
-            parts.append(("." if parts else "") + str(loc))
+            # A misspelt key may be empty or hold control characters: quote it so the message
+            # stays one readable line per mistake.
+            name = str(loc) if str(loc).isprintable() and str(loc).strip() else repr(loc)
+            parts.append(("." if parts else "") + name)
             node = node.get(loc) if isinstance(node, dict) else None
     field = "".join(parts) or "(top level)"
     message = _PLAIN_MESSAGES.get(err["type"], err["msg"])
