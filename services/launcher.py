@@ -107,10 +107,11 @@ class ServiceGroup:
 
 BOXES = ("rendered", "simulated")
 TEMPORARY_DB = "temporary"
-# With the detector on a CPU, a camera's cylinders reach the tracker a few hundred ms after its
-# capture, and later still on a busy machine; a tick that went without them would drop them as
-# late. So the tracker waits longer for late cameras than with the simulator's boxes.
-DETECTOR_MAX_WAIT_MS = 400
+# With the detector on a CPU, every camera's frame of one instant waits its turn in one detector,
+# so the last camera's cylinders reach the tracker about (cameras x time per frame) after capture:
+# 9 x 50-60 ms on a busy 2-core machine. A tick that went without them would drop them as late,
+# so the tracker waits up to a second for late cameras (the simulator's boxes need 150 ms).
+DETECTOR_MAX_WAIT_MS = 1000
 
 
 def start_pipeline(group: ServiceGroup, port: int, *, boxes: str = "rendered", history_db: str | Path | None = TEMPORARY_DB,

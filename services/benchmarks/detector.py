@@ -5,12 +5,19 @@ on a rendered frame of each height (``bevflow.detect.benchmark.rendered_frame``:
 at 1.5 x the detector's scale, as a camera's own frame is larger than the model's input). Without
 a model file (none given and none shipped) or without ONNX Runtime, nothing is timed and the
 result says why: no number is made up.
+
+``bench_rendering`` times what feeds the detector in the live demo: a simulated camera's frame
+rendered at the detector's input scale (``bevflow.sim.render_feed.RenderedCameras``) for a
+site's crowd, per camera and frame.
+
+    python -m bevflow_services.benchmarks.detector [--render-only] [--people 50] [--frames 30]
 """
 
 from __future__ import annotations
 
 import importlib.util
 import math
+import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -100,9 +107,62 @@ def bench_detector(
     return {"available": True, "reason": None, "rows": rows}
 
 
+def bench_rendering(site_name: str = "demo-hall", people: int = 50, frames: int = 30, warmup: int = 10,
+                    cameras: tuple[str, ...] | None = None) -> dict:
+    """ms per rendered camera frame (median, 90th percentile, wall clock) for ``people`` walking
+    in ``site_name``, timed over ``frames`` scene frames after ``warmup`` (the crowd walks in
+    first), with the frame size and the number of people each camera showed."""
+    from bevflow.sim.feed import scene_for_site
+    from bevflow.sim.render_feed import RenderedCameras
+    from bevflow.sim.render_textures import Appearance
+    from bevflow.sim.scene import Scene
+    from bevflow.site import load_site_or_builtin
+
+    site = load_site_or_builtin(site_name)
+    preset = scene_for_site(site, people=people).with_scene(frames=warmup + frames)
+    chosen = list(cameras) if cameras else site.camera_ids
+    renderers = RenderedCameras(site, preset.scene, chosen)
+    times: dict[str, list[float]] = {c: [] for c in chosen}
+    shown: dict[str, list[int]] = {c: [] for c in chosen}
+    pose_s: list[float] = []
+    for frame in Scene(preset.scene).run():
+        if frame.index < warmup:
+            continue
+        start = time.perf_counter()
+        bodies = frame.primitives()
+        appearance = Appearance.for_identities(frame.identity)
+        pose_s.append(time.perf_counter() - start)
+        for camera in chosen:
+            start = time.perf_counter()
+            out = renderers.render(camera, frame, bodies, appearance)
+            times[camera].append(time.perf_counter() - start)
+            shown[camera].append(len(out.boxes))
+    rows = [{"camera": c, "frame": "{}x{}".format(*renderers.frame_size(c)), "people_shown": round(float(np.mean(shown[c])), 1),
+             "ms_p50": round(percentile([t * 1e3 for t in times[c]], 50), 2),
+             "ms_p90": round(percentile([t * 1e3 for t in times[c]], 90), 2)} for c in chosen]
+    return {"site": site_name, "people": people, "frames": frames,
+            "pose_ms_p50": round(percentile([t * 1e3 for t in pose_s], 50), 2), "rows": rows}
+
+
 def lookup(result: dict, height_m: float, threads: int) -> float | None:
     """ms per frame of one row of ``bench_detector``'s result, None if it was not measured."""
     for row in result["rows"]:
         if math.isclose(row["height_m"], height_m) and row["threads"] == threads:
             return float(row["ms_p50"])
     return None
+
+
+if __name__ == "__main__":
+    import argparse
+    import json
+
+    parser = argparse.ArgumentParser(description="Rendering and detector speed per camera frame.")
+    parser.add_argument("--render-only", action="store_true", help="time the rendering only")
+    parser.add_argument("--site", default="demo-hall")
+    parser.add_argument("--people", type=int, default=50)
+    parser.add_argument("--frames", type=int, default=30)
+    parser.add_argument("--repeats", type=int, default=30, help="detector calls per height and thread count")
+    cli = parser.parse_args()
+    print(json.dumps(bench_rendering(cli.site, cli.people, cli.frames), indent=1), flush=True)
+    if not cli.render_only:
+        print(json.dumps(bench_detector(repeats=cli.repeats), indent=1))

@@ -7,10 +7,16 @@ measures for every message its delivery time minus the capture time it carries: 
 raised it). Frames dropped at the source are counted from gaps in the ground-truth frame numbers,
 and each service's CPU use is read from ``/proc`` (in cores: 1.0 is one core busy all the time).
 
+Two modes (``boxes``): ``"simulated"`` (the default here), where the simulated ingest publishes
+the boxes a detector would, so this is the system without the detector's own cost; and
+``"rendered"`` (``--detector``), where the ingest renders every camera's frames at the detector's
+input scale and the detector service runs the shipped ONNX model on them, as in ``bevflow demo``.
+Then the detector's own output is timed too (capture to detections, per frame) and the frames it
+skipped (latest frame wins) are counted from the gaps in each camera's detection sequence numbers.
+
 ``max_cameras`` raises the number of simulated 10 fps cameras until the machine no longer keeps
 up: frames are dropped at the source, ticks come out late (tracks p99 over a bound), or fewer
-ticks come out than the cameras' frame rate. The simulated ingest publishes the boxes a detector
-would, so this is the system without the detector's own cost.
+ticks come out than the cameras' frame rate.
 """
 
 from __future__ import annotations
@@ -27,7 +33,7 @@ from pathlib import Path
 
 import websockets
 
-from bevflow.schemas import SimulatedTruth
+from bevflow.schemas import Detections2D, SimulatedTruth
 from bevflow.site import Site, dump_site, load_site_or_builtin
 
 from bevflow_services import bus
@@ -90,9 +96,36 @@ async def _listen(url: str, latencies: list[float], stamp: str, until: float, ki
                     kinds[event.get("type", "?")] = kinds.get(event.get("type", "?"), 0) + 1
 
 
-def measure(duration_s: float = 30.0, people: int | None = None, warmup_s: float = 5.0, cameras: int = 4) -> dict:
+class DetectionLog:
+    """Per camera: the detection sequence numbers seen and each message's age on arrival."""
+
+    def __init__(self) -> None:
+        self.lock = threading.Lock()
+        self.recording = False
+        self.seqs: dict[str, list[int]] = {}
+        self.ages_ms: list[float] = []
+
+    def on_detections(self, message: Detections2D) -> None:
+        now = time.time_ns()
+        with self.lock:
+            if self.recording:
+                self.seqs.setdefault(message.camera, []).append(message.seq)
+                self.ages_ms.append((now - message.capture_ns) / 1e6)
+
+    def summary(self) -> dict:
+        with self.lock:
+            detected = sum(len(s) for s in self.seqs.values())
+            skipped = sum(max(s) - min(s) + 1 - len(set(s)) for s in self.seqs.values() if s)
+            return {"frames_detected": detected, "frames_skipped_by_detector": skipped,
+                    "detections_latency_p50_ms": percentile(self.ages_ms, 50),
+                    "detections_latency_p99_ms": percentile(self.ages_ms, 99)}
+
+
+def measure(duration_s: float = 30.0, people: int | None = None, warmup_s: float = 5.0, cameras: int = 4,
+            boxes: str = "simulated") -> dict:
     """Run the live system on ``hall_site(cameras)`` with ``people`` walking (default 7.5 per
-    camera) and measure for ``duration_s`` after ``warmup_s``."""
+    camera) and measure for ``duration_s`` after ``warmup_s``. ``boxes``: ``"simulated"`` or
+    ``"rendered"`` (rendered frames through the detector service)."""
     people = people if people is not None else round(PEOPLE_PER_CAMERA * cameras)
     site = hall_site(cameras)
     with tempfile.TemporaryDirectory(prefix="bevflow-bench-") as tmp:
@@ -100,7 +133,8 @@ def measure(duration_s: float = 30.0, people: int | None = None, warmup_s: float
         site_path.write_text(dump_site(site))
         group = ServiceGroup(site=str(site_path), log_dir=Path(tmp) / "logs")
         with group:
-            base = start_pipeline(group, free_port(), ingest_args=("--people", str(people)), gateway_args=("--no-view3d",))
+            base = start_pipeline(group, free_port(), boxes=boxes, history_db=None,
+                                  ingest_args=("--people", str(people)), gateway_args=("--no-view3d",))
             frames: list[int] = []
             session = bus.open_session(bus.BusConfig(mode="peer", listen=("tcp/127.0.0.1:0",),
                                                      connect=(f"tcp/127.0.0.1:{group.hub_port}",)))
@@ -111,6 +145,9 @@ def measure(duration_s: float = 30.0, people: int | None = None, warmup_s: float
                     frames.append(truth.frame)
 
             sub = bus.subscribe(session, bus.Keys(site.site).truth, bus.JsonCodec(SimulatedTruth), on_truth)
+            detections = DetectionLog()
+            det_sub = bus.subscribe(session, bus.Keys(site.site).detections("*"), bus.JsonCodec(Detections2D),
+                                    detections.on_detections)
             time.sleep(warmup_s)
             tracks_ms: list[float] = []
             alerts_ms: list[float] = []
@@ -124,17 +161,23 @@ def measure(duration_s: float = 30.0, people: int | None = None, warmup_s: float
 
             with lock:
                 first = len(frames)
+            with detections.lock:
+                detections.recording = True
             cpu_before = {child.name: cpu_seconds(child.process.pid) for child in group.children}
             asyncio.run(both())
             cpu_share = {child.name: round((cpu_seconds(child.process.pid) - cpu_before[child.name]) / duration_s, 3)
                          for child in group.children}
             with lock:
                 seen = frames[first:]
+            with detections.lock:
+                detections.recording = False
+            det_sub.close()
             sub.close()
             session.close()
             dead = [child.name for child in group.dead()]
     expected = (seen[-1] - seen[0] + 1) if seen else 0
     return {
+        "boxes": boxes,
         "cameras": cameras,
         "fps": FPS,
         "people": people,
@@ -149,6 +192,7 @@ def measure(duration_s: float = 30.0, people: int | None = None, warmup_s: float
         "frames_dropped_at_source": expected - len(set(seen)),
         "frames_published": len(set(seen)),
         "alert_latency_mean_ms": statistics.fmean(alerts_ms) if alerts_ms else math.nan,
+        **detections.summary(),
         "services_died": dead,
         "cpu_cores_by_service": cpu_share,
     }
@@ -170,15 +214,16 @@ def keeps_up(run: dict, bound_ms: float = LATENCY_BOUND_MS) -> tuple[bool, str]:
 
 
 def max_cameras(steps: list[int], duration_s: float, warmup_s: float, first: dict | None = None,
-                bisect: bool = True) -> dict:
+                bisect: bool = True, boxes: str = "simulated") -> dict:
     """Try the camera counts ``steps`` (ascending) until one fails, then (``bisect``) once halfway
     between the last that kept up and the first that did not. ``first`` is a result of
-    ``measure`` already made for ``steps[0]``. Returns the largest count that kept up (None if
-    even the first failed), whether it is only a lower bound (nothing failed), and every probe."""
+    ``measure`` already made for ``steps[0]``; ``boxes`` as for ``measure``. Returns the largest
+    count that kept up (None if even the first failed), whether it is only a lower bound (nothing
+    failed), and every probe."""
     probes: list[dict] = []
 
     def probe(n: int) -> bool:
-        run = first if (first is not None and n == first["cameras"]) else measure(duration_s, None, warmup_s, n)
+        run = first if (first is not None and n == first["cameras"]) else measure(duration_s, None, warmup_s, n, boxes)
         ok, why = keeps_up(run)
         probes.append({"cameras": n, "kept_up": ok, "why": why, "tracks_latency_p99_ms": run["tracks_latency_p99_ms"],
                        "frames_dropped_at_source": run["frames_dropped_at_source"], "people": run["people"]})
@@ -205,9 +250,13 @@ if __name__ == "__main__":
     parser.add_argument("--duration", type=float, default=30.0)
     parser.add_argument("--people", type=int, default=None, help="default: 7.5 per camera")
     parser.add_argument("--cameras", type=int, default=4)
+    parser.add_argument("--detector", action="store_true",
+                        help="render the cameras' frames and run the detector service on them (as bevflow demo does)")
+    parser.add_argument("--warmup", type=float, default=5.0)
     parser.add_argument("--json", type=Path, default=None)
     args = parser.parse_args()
-    result = measure(args.duration, args.people, cameras=args.cameras)
+    result = measure(args.duration, args.people, args.warmup, cameras=args.cameras,
+                     boxes="rendered" if args.detector else "simulated")
     for key, value in result.items():
         print(f"{key:28s} {value:.1f}" if isinstance(value, float) else f"{key:28s} {value}")
     if args.json:

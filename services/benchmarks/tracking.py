@@ -6,7 +6,10 @@ by one to four cameras (two on average). P people wander over the floor at 1.0-1
 camera reports the people inside its circle as its own noisy copy (feet noise growing with the
 distance from the camera, 5 % missed, a few weak fits, false positives), so the tick meets what
 the projector delivers, without running the simulator or the cylinder fit: what is timed is the
-tick alone. Observations are made before timing starts.
+tick alone. Observations are made before timing starts, and carry the covariance of each feet
+position as the projector sends it (``bevflow.fusion.with_position_covariance``, computed once per
+detection where the camera is); ``--covariance fusion`` leaves it out, so fusion computes it in the
+tick, as it does for callers that hand ``SiteTracker`` bare cylinders (the evaluation suite).
 
 Per tick it reports the wall-clock median and 95th percentile, the median CPU time of the
 thread, and a breakdown of that CPU time into the stages of the step: fusion, tracker, analytics
@@ -27,6 +30,7 @@ import numpy as np
 
 import bevflow.live.site_tracker as site_tracker_module
 from bevflow.detections import Cylinders
+from bevflow.fusion import with_position_covariance
 from bevflow.live.site_tracker import SiteTracker
 from bevflow.metrics.tracking import score_tracking
 from bevflow.site import CameraConfig, Intrinsics, Pose, Site, Thresholds, Zone
@@ -38,6 +42,7 @@ CAMERA_HEIGHT_M = 5.5
 MONITORED_RADIUS_M = 8.0
 FPS = 10.0
 STAGES = ("fusion", "tracker", "analytics")
+COVARIANCE_SOURCES = ("projector", "fusion")
 
 
 def grid_site(cameras: int, people: int) -> Site:
@@ -135,14 +140,25 @@ def stage_clock(tracker: SiteTracker) -> Iterator[StageClock]:
         del tracker.tracker.update, tracker.analytics.update
 
 
+def with_projector_covariance(site: Site, per_camera: dict[str, Cylinders]) -> dict[str, Cylinders]:
+    """Each camera's cylinders carrying their position covariance, as the projector sends them."""
+    cameras = [site.camera(c) for c in site.camera_ids]
+    return {c: with_position_covariance(cyl.with_camera(site.camera_index(c)), cameras) for c, cyl in per_camera.items()}
+
+
 def bench_tick(people: int, cameras: int, ticks: int = 100, warmup: int = 20, seed: int = 0,
-               profiler: cProfile.Profile | None = None) -> dict:
+               profiler: cProfile.Profile | None = None, covariance: str = "projector") -> dict:
     """Time ``ticks`` steps after ``warmup`` untimed ones (tracks need a few hits to confirm);
-    ``profiler`` (optional) is enabled around the timed steps only."""
+    ``profiler`` (optional) is enabled around the timed steps only. ``covariance`` says where the
+    position covariances come from: "projector" (with the cylinders) or "fusion" (in the tick)."""
+    if covariance not in COVARIANCE_SOURCES:
+        raise ValueError(f"covariance must be one of {COVARIANCE_SOURCES}, got {covariance!r}")
     rng = np.random.default_rng(seed)
     site = grid_site(cameras, people)
     truth = walk(people, warmup + ticks, site.floor, rng)  # type: ignore[arg-type]
     observations = [observe(site, xy, rng) for xy in truth]
+    if covariance == "projector":
+        observations = [with_projector_covariance(site, per_camera) for per_camera in observations]
     tracker = SiteTracker(site)
     period_ns = int(1e9 / FPS)
     t0 = 1_700_000_000_000_000_000
@@ -172,6 +188,7 @@ def bench_tick(people: int, cameras: int, ticks: int = 100, warmup: int = 20, se
     return {
         "people": people,
         "cameras": cameras,
+        "covariance": covariance,
         "ticks": ticks,
         "cylinders_per_tick": float(np.mean(inputs[warmup:])),
         "ms_p50": float(np.median(ms)),
@@ -185,9 +202,10 @@ def bench_tick(people: int, cameras: int, ticks: int = 100, warmup: int = 20, se
     }
 
 
-def bench_grid(people: list[int], cameras: list[int], ticks: int, warmup: int, seed: int = 0) -> list[dict]:
+def bench_grid(people: list[int], cameras: list[int], ticks: int, warmup: int, seed: int = 0,
+               covariance: str = "projector") -> list[dict]:
     """``bench_tick`` for every (people, cameras) pair."""
-    return [bench_tick(p, c, ticks, warmup, seed) for c in cameras for p in people]
+    return [bench_tick(p, c, ticks, warmup, seed, covariance=covariance) for c in cameras for p in people]
 
 
 def format_rows(rows: list[dict]) -> list[str]:
@@ -211,6 +229,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--cameras", type=int, nargs="+", default=[4, 16, 64])
     parser.add_argument("--ticks", type=int, default=100, help="timed ticks per case")
     parser.add_argument("--warmup", type=int, default=20, help="untimed ticks first")
+    parser.add_argument("--covariance", choices=COVARIANCE_SOURCES, default="projector",
+                        help="where position covariances come from: with the cylinders, as the projector sends "
+                        "them (default), or computed by fusion in the tick")
     parser.add_argument("--profile", action="store_true",
                         help="profile the timed steps of the first case (cProfile, thread CPU time) instead of timing")
     args = parser.parse_args(argv)
@@ -218,10 +239,11 @@ def main(argv: list[str] | None = None) -> None:
         import pstats
 
         profiler = cProfile.Profile(time.thread_time)
-        bench_tick(args.people[0], args.cameras[0], args.ticks, args.warmup, profiler=profiler)
+        bench_tick(args.people[0], args.cameras[0], args.ticks, args.warmup, profiler=profiler,
+                   covariance=args.covariance)
         pstats.Stats(profiler).sort_stats("tottime").print_stats(30)
         return
-    for line in format_rows(bench_grid(args.people, args.cameras, args.ticks, args.warmup)):
+    for line in format_rows(bench_grid(args.people, args.cameras, args.ticks, args.warmup, covariance=args.covariance)):
         print(line, flush=True)
 
 

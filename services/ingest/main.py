@@ -53,6 +53,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--drop", type=float, default=LIVE_NOISE.drop, help="simulation: missed detections")
     group.add_argument("--false-positives", type=float, default=LIVE_NOISE.false_positives,
                        help="simulation: spurious boxes per camera per frame")
+    group.add_argument("--camera-fps", type=float, default=None,
+                       help="simulation with --render: frames per second each camera publishes (default: the "
+                       "scene's rate, 10); lower it when the detector cannot keep up with every camera")
     group.add_argument("--folder-fps", type=float, default=10.0, help="frame rate of image-folder sources")
 
 
@@ -60,6 +63,8 @@ def main(args: argparse.Namespace) -> int:
     site, site_id = service_site(args)
     if args.render and not args.simulate:
         raise UserError("--render renders the simulator's frames; use it with --simulate")
+    if args.camera_fps is not None and not args.render:
+        raise UserError("--camera-fps sets the rate of rendered frames; use it with --simulate --render")
     cameras = [c for c in args.cameras.split(",") if c] or site.camera_ids
     unknown = sorted(set(cameras) - set(site.camera_ids))
     if unknown:
@@ -123,11 +128,15 @@ def simulate_frames(session, keys: bus.Keys, site: Site, cameras: list[str], arg
     truth_out = bus.Publication(session, keys.truth, bus.JsonCodec(SimulatedTruth))
     sizes = {c: renderers.frame_size(c) for c in cameras}
     period_ns = int(1e9 / feed.fps)
+    every = camera_frame_stride(feed.fps, args.camera_fps)
     start_ns = time.time_ns()
     skipped = 0
     shown = ", ".join(f"{c} {w}x{h}" for c, (w, h) in sizes.items())
-    print(f"bevflow ingest: rendering {len(cameras)} cameras of {site.site!r} at {feed.fps:g} fps ({shown})", flush=True)
+    print(f"bevflow ingest: rendering {len(cameras)} cameras of {site.site!r} at {feed.fps / every:g} fps ({shown})",
+          flush=True)
     for scene_frame, truth in feed.scene_frames():
+        if scene_frame.index % every:  # the crowd moves on between the frames the cameras take
+            continue
         due_ns = start_ns + scene_frame.index * period_ns
         if stop.wait(max(0.0, (due_ns - time.time_ns()) / 1e9)):
             break
@@ -145,13 +154,22 @@ def simulate_frames(session, keys: bus.Keys, site: Site, cameras: list[str], arg
         # camera's newest frame gets frames of one instant.
         for camera, image in images.items():
             w, h = sizes[camera]
-            header = FrameHeader(camera=camera, seq=scene_frame.index, capture_ns=capture_ns, width=w, height=h)
+            header = FrameHeader(camera=camera, seq=scene_frame.index // every, capture_ns=capture_ns, width=w, height=h)
             publications[camera].put(bus.Frame(header, image))
         truth_out.put(SimulatedTruth(
             site=site.site, frame=scene_frame.index, capture_ns=capture_ns, tracks=truth.track_ids.tolist(),
             positions=[(float(x), float(y)) for x, y in truth.feet_xy]))
     for publication in [*publications.values(), truth_out]:
         publication.close()
+
+
+def camera_frame_stride(scene_fps: float, camera_fps: float | None) -> int:
+    """Publish every n-th scene frame so each camera runs at about ``camera_fps``."""
+    if camera_fps is None:
+        return 1
+    if not 0 < camera_fps <= scene_fps:
+        raise UserError(f"--camera-fps must be above 0 and at most the scene's {scene_fps:g} fps, got {camera_fps:g}")
+    return max(1, round(scene_fps / camera_fps))
 
 
 def stream(session, keys: bus.Keys, site: Site, cameras: list[str], args: argparse.Namespace, stop) -> None:

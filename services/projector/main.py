@@ -4,7 +4,10 @@
 
 Subscribes to every camera's detections of the site and publishes one ``CameraCylinders`` per
 detections message. The fit is the paper's 3D cylinder estimation (``bevflow.cylinder``); its
-per-camera lookup tables are built on a camera's first message. Messages from cameras the site
+per-camera lookup tables are built on a camera's first message. Each cylinder carries the
+covariance of its feet position (``bevflow.fusion.position_covariance``): it needs the camera,
+which is at hand here, and computing it once per detection here spares the tracker, which fuses
+every camera in one thread, from projecting every cylinder again. Messages from cameras the site
 does not know are counted and skipped, never fatal. Under overload the oldest detections are
 dropped (counted), so what is published stays current.
 """
@@ -15,6 +18,7 @@ import argparse
 import logging
 
 from bevflow.cylinder import METHODS, fit_cylinders
+from bevflow.fusion import with_position_covariance
 from bevflow.schemas import CameraCylinders, Detections2D
 from bevflow.site import Site
 
@@ -40,6 +44,7 @@ class Projector:
         self.site = site
         self.method = method
         self.unknown_cameras: set[str] = set()
+        self._cameras = [site.camera(c) for c in site.camera_ids]  # by index, as fusion takes them
 
     def project(self, message: Detections2D) -> CameraCylinders | None:
         if message.camera not in self.site.built_cameras:
@@ -49,8 +54,10 @@ class Projector:
                 self.unknown_cameras.add(message.camera)
             return None
         index = self.site.camera_index(message.camera)
-        cylinders = fit_cylinders(self.site.camera(message.camera), message.to_boxes(), self.method,
-                                  camera_index=index)
+        camera = self._cameras[index]
+        cylinders = fit_cylinders(camera, message.to_boxes(), self.method, camera_index=index)
+        cylinders = cylinders[cylinders.near(camera.center, self.site.cameras[index].reporting_radius_m)]
+        cylinders = with_position_covariance(cylinders, self._cameras)
         return CameraCylinders.from_cylinders(message.camera, message.seq, message.capture_ns, cylinders)
 
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -104,7 +104,11 @@ class Cylinders:
     lower radius (the upper one is a fixed fraction of it). ``camera`` (N,) is the index of the
     camera that produced each one (−1 once fused from several), ``score`` (N,) the fit quality in
     [0, 1] (the best IoU for a cylinder fit), and ``occluded`` (N,) marks fits rebuilt from the
-    head after a lower-body occlusion."""
+    head after a lower-body occlusion.
+
+    ``covariance`` (N, 2, 2), optional: how uncertain each feet position is, in m², when the stage
+    that made the cylinders knows (the projector computes it once per detection, from its camera,
+    so fusion need not). None when nobody said; a row of NaN where that row's is unknown."""
 
     xy: FloatArray
     height: FloatArray = field(default=None)  # type: ignore[assignment]
@@ -112,6 +116,7 @@ class Cylinders:
     camera: IntArray = field(default=None)  # type: ignore[assignment]
     score: FloatArray = field(default=None)  # type: ignore[assignment]
     occluded: NDArray[np.bool_] = field(default=None)  # type: ignore[assignment]
+    covariance: FloatArray | None = None
 
     def __post_init__(self) -> None:
         xy = _rows("xy", self.xy, 2)
@@ -122,6 +127,11 @@ class Cylinders:
         object.__setattr__(self, "camera", _column("camera", self.camera, n, -1, np.int64))
         object.__setattr__(self, "score", _column("score", self.score, n, 1.0, np.float64))
         object.__setattr__(self, "occluded", _column("occluded", self.occluded, n, False, np.bool_))
+        if self.covariance is not None:
+            covariance = np.asarray(self.covariance, dtype=np.float64)
+            if covariance.shape != (n, 2, 2):
+                raise ValueError(f"covariance must have shape ({n}, 2, 2), got {covariance.shape}")
+            object.__setattr__(self, "covariance", covariance)
 
     @classmethod
     def empty(cls) -> Cylinders:
@@ -138,16 +148,32 @@ class Cylinders:
             camera=self.camera[index],
             score=self.score[index],
             occluded=self.occluded[index],
+            covariance=None if self.covariance is None else self.covariance[index].reshape(-1, 2, 2),
         )
 
     def with_camera(self, camera: int) -> Cylinders:
         return replace(self, camera=np.full(len(self), camera, dtype=np.int64))
 
+    def near(self, centre_xy: ArrayLike, radius_m: float | None) -> NDArray[np.bool_]:
+        """Which rows have their feet within ``radius_m`` of ``centre_xy`` on the floor (every row
+        when ``radius_m`` is None; rows with unknown feet count as near, for fusion to judge)."""
+        if radius_m is None:
+            return np.ones(len(self), dtype=bool)
+        distance = np.linalg.norm(self.xy - np.asarray(centre_xy, dtype=np.float64)[:2], axis=1)
+        return ~(distance > radius_m)
+
     @staticmethod
     def merge(parts: list[Cylinders]) -> Cylinders:
+        """The rows of every part, in order. Covariances are kept when any part has them (NaN
+        rows for the parts that have none)."""
         parts = [p for p in parts if len(p)]
         if not parts:
             return Cylinders.empty()
+        covariance = None
+        if any(p.covariance is not None for p in parts):
+            covariance = np.concatenate(
+                [p.covariance if p.covariance is not None else np.full((len(p), 2, 2), np.nan) for p in parts]
+            )
         return Cylinders(
             xy=np.concatenate([p.xy for p in parts]),
             height=np.concatenate([p.height for p in parts]),
@@ -155,4 +181,5 @@ class Cylinders:
             camera=np.concatenate([p.camera for p in parts]),
             score=np.concatenate([p.score for p in parts]),
             occluded=np.concatenate([p.occluded for p in parts]),
+            covariance=covariance,
         )

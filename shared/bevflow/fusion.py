@@ -22,6 +22,10 @@ squared errors near χ²(2) (median 1.7 against 1.4, 99th percentile 11.8 agains
 0.86 against 0.82), and under a ceiling fisheye 3.3 m up they gate at 0.45–0.55 m, about the
 paper's distance.
 
+A cylinder may carry its covariance (``Cylinders.covariance``): the projector computes it once
+per detection with ``with_position_covariance``, the same function of the same inputs, so the
+central tick does not project every cylinder again; fusion computes only the rows that lack one.
+
 **Gate.** Two cylinders of different cameras may be one person when their feet are closer than
 ``distance_m`` (the paper's rule, kept so overhead cameras behave as in the paper) *or* their
 Mahalanobis distance under the sum of the two covariances is below ``gate_chi2`` (9.21: 99 % of
@@ -64,7 +68,7 @@ range² (range: camera centre to feet), a monocular fit's error growing with ran
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -118,7 +122,9 @@ def fuse_cylinders(
 ) -> Fusion:
     """Merge the cylinders of different cameras that are one person: feet closer than
     ``distance_m``, or (unless ``noise`` is None) within ``gate_chi2`` of each other given their
-    position covariances and closer than ``max_gate_m``. ``cylinders.camera`` indexes ``cameras``."""
+    position covariances and closer than ``max_gate_m``. ``cylinders.camera`` indexes ``cameras``.
+    With ``noise``, rows with a finite ``cylinders.covariance`` use it and ``noise`` gives the
+    others theirs; the paper's rule (``noise=None``) uses no covariance."""
     if not (distance_m > 0 and gate_chi2 > 0 and max_gate_m > 0):
         raise ValueError(
             f"distance_m, gate_chi2 and max_gate_m must be > 0, got {distance_m}, {gate_chi2}, {max_gate_m}"
@@ -131,13 +137,11 @@ def fuse_cylinders(
         info = _range_information(rows, cameras)
         labels = _group(rows.xy, rows.camera, None, distance_m, gate_chi2, max_gate_m)
     else:
-        covariance = position_covariance(rows, cameras, noise)
+        covariance = _carried_or_computed_covariance(rows, cameras, noise)
         info = _inverse_2x2(covariance)
         labels = _group(rows.xy, rows.camera, covariance, distance_m, gate_chi2, max_gate_m)
     strong = rows.score > 0
-    has_strong = np.zeros(labels.max() + 1 if len(labels) else 0, dtype=bool)
-    np.logical_or.at(has_strong, labels, strong)
-    real = has_strong[labels]
+    real = (np.bincount(labels, weights=strong) > 0)[labels]  # in a group with a strong view
     if not real.any():
         return Fusion(fused=Cylinders.empty(), assignment=assignment, n_views=np.zeros(0, dtype=np.int64))
     # Number the people in the order their first cylinder arrived.
@@ -172,10 +176,13 @@ def position_covariance(
         np.stack([base, base + [_PROBE_M, 0.0, 0.0], base + [0.0, _PROBE_M, 0.0]], axis=1),
     ], axis=1)
     uv = np.full((n, 11, 2), np.nan)
-    finite = np.isfinite(xy).all(axis=1)
-    for index in np.unique(cylinders.camera[finite]):
-        rows = np.flatnonzero(finite & (cylinders.camera == index))
-        uv[rows] = cameras[int(index)].project(points[rows].reshape(-1, 3)).reshape(-1, 11, 2)
+    finite = np.flatnonzero(np.isfinite(xy).all(axis=1))
+    by_camera = finite[np.argsort(cylinders.camera[finite], kind="stable")]
+    starts = np.flatnonzero(np.diff(cylinders.camera[by_camera], prepend=-1))
+    for rows in np.split(by_camera, starts[1:]):  # one run of rows per camera
+        if len(rows):
+            camera = cameras[int(cylinders.camera[rows[0]])]
+            uv[rows] = camera.project(points[rows].reshape(-1, 3)).reshape(-1, 11, 2)
 
     pixel_sigma = noise.box_fraction * (uv[:, :8].max(axis=1) - uv[:, :8].min(axis=1))
     jacobian = np.stack([uv[:, 9] - uv[:, 8], uv[:, 10] - uv[:, 8]], axis=2) / _PROBE_M  # d(u, v) / d(x, y)
@@ -188,6 +195,26 @@ def position_covariance(
     covariance[:, 1, 1] += noise.floor_m**2
     if occluded.any():
         covariance += _head_height_covariance(cylinders, cameras, noise.head_height_m)
+    # Exactly symmetric (the products above are only up to rounding), so three numbers carry it.
+    return 0.5 * (covariance + covariance.transpose(0, 2, 1))
+
+
+def with_position_covariance(
+    cylinders: Cylinders, cameras: Sequence[Camera], noise: PositionNoise = PositionNoise()
+) -> Cylinders:
+    """``cylinders`` carrying their ``position_covariance``, for a stage upstream of fusion (the
+    projector) to compute it where the camera is at hand, once per detection."""
+    return replace(cylinders, covariance=position_covariance(cylinders, cameras, noise))
+
+
+def _carried_or_computed_covariance(rows: Cylinders, cameras: Sequence[Camera], noise: PositionNoise) -> FloatArray:
+    """The rows' own covariances where they carry a finite one, ``position_covariance`` elsewhere."""
+    if rows.covariance is None:
+        return position_covariance(rows, cameras, noise)
+    covariance = rows.covariance.copy()
+    missing = ~np.isfinite(covariance).all(axis=(1, 2))
+    if missing.any():
+        covariance[missing] = position_covariance(rows[missing], cameras, noise)
     return covariance
 
 
@@ -225,6 +252,12 @@ def _inverse_2x2(m: FloatArray) -> FloatArray:
         return np.stack([np.stack([d, -b], axis=1), np.stack([-c, a], axis=1)], axis=1) / det[:, None, None]
 
 
+def _largest_eigenvalue(m: FloatArray) -> FloatArray:
+    """The larger eigenvalue of each symmetric (N, 2, 2) matrix (its lower triangle read)."""
+    a, b, d = m[:, 0, 0], m[:, 1, 0], m[:, 1, 1]
+    return 0.5 * (a + d) + np.hypot(0.5 * (a - d), b)
+
+
 def _range_information(rows: Cylinders, cameras: Sequence[Camera]) -> FloatArray:
     """The paper-rule weights score / range², as isotropic information matrices."""
     centres = np.array([c.center for c in cameras]).reshape(-1, 3)[rows.camera]
@@ -245,17 +278,19 @@ def _group(
     n = len(xy)
     radius = distance_m
     if covariance is not None and n:
-        # d² < χ² needs distance² < χ² · λmax(Σa + Σb) <= χ² · 2 · max λmax.
-        largest = float(np.max(np.linalg.eigvalsh(covariance)[:, -1]))
+        # d² < χ² needs distance² < χ² · λmax(Σa + Σb) <= χ² · 2 · max λmax. The closed form of
+        # a 2 × 2 eigenvalue may round below LAPACK's: a hair of margin keeps every pair that
+        # could pass (the search radius only picks candidates; the gate decides).
+        largest = float(np.max(_largest_eigenvalue(covariance))) * (1.0 + 1e-9)
         radius = max(distance_m, min(max_gate_m, float(np.sqrt(2.0 * gate_chi2 * largest))))
     pairs = cKDTree(xy).query_pairs(radius, output_type="ndarray") if n else np.zeros((0, 2), dtype=np.int64)
     if len(pairs) == 0:
         return np.arange(n)
     a, b = pairs[:, 0], pairs[:, 1]
-    gap = np.linalg.norm(xy[a] - xy[b], axis=1)
+    diff = xy[a] - xy[b]
+    gap = np.hypot(diff[:, 0], diff[:, 1])
     depth = (gap / distance_m) ** 2  # how deep inside its gate a pair lies: < 1 is inside
     if covariance is not None:
-        diff = xy[a] - xy[b]
         with np.errstate(invalid="ignore"):
             d2 = np.einsum("ni,nij,nj->n", diff, _inverse_2x2(covariance[a] + covariance[b]), diff)
         d2 = np.where(np.isfinite(d2) & (gap < max_gate_m), d2, np.inf)
@@ -284,40 +319,54 @@ def _split_greedily(labels: IntArray, camera: IntArray, pairs: IntArray, depth: 
     nodes = np.unique(pairs)
     fresh = labels.max() + 1 + np.arange(len(nodes))
     labels[nodes] = fresh  # every tangled row alone, under a label no clean component uses
-    members = {int(label): [int(node)] for label, node in zip(fresh, nodes)}
-    linked = {(int(a), int(b)) for a, b in pairs} | {(int(b), int(a)) for a, b in pairs}
-    for k in np.argsort(depth, kind="stable"):
-        a, b = int(labels[pairs[k, 0]]), int(labels[pairs[k, 1]])
-        if a == b:
+    # Plain Python sets and ints: a few hundred pairs per tick, each needing a handful of
+    # membership tests, are far cheaper this way than as numpy calls.
+    group = {node: node for node in nodes.tolist()}  # row -> the row its group is named after
+    members = {node: [node] for node in group}
+    cameras = {node: 1 << int(camera[node]) for node in group}  # a bit per camera in the group
+    linked: dict[int, set[int]] = {node: set() for node in group}
+    ordered = pairs[np.argsort(depth, kind="stable")].tolist()
+    for a, b in ordered:
+        linked[a].add(b)
+        linked[b].add(a)
+    for a, b in ordered:
+        ga, gb = group[a], group[b]
+        if ga == gb or cameras[ga] & cameras[gb]:
             continue
-        group_a, group_b = members[a], members[b]
-        if {int(camera[i]) for i in group_a} & {int(camera[j]) for j in group_b}:
-            continue
-        if all((i, j) in linked for i in group_a for j in group_b):
-            group_a.extend(group_b)
-            labels[group_b] = a
-            del members[b]
+        joining = members[gb]
+        if all(linked[i].issuperset(joining) for i in members[ga]):
+            members[ga].extend(joining)
+            cameras[ga] |= cameras[gb]
+            for j in joining:
+                group[j] = ga
+            del members[gb], cameras[gb]
+    label_of = dict(zip(nodes.tolist(), fresh.tolist()))
+    labels[nodes] = [label_of[group[node]] for node in nodes.tolist()]
 
 
 def _merge(rows: Cylinders, person: IntArray, n_people: int, info: FloatArray) -> tuple[Cylinders, IntArray]:
     """One row per person: feet by information-weighted mean (``info``: (N, 2, 2) per row, zero for
     rows that must not move it), height and radius weighted by √det(info)."""
     n_views = np.bincount(person, minlength=n_people).astype(np.int64)
-    total_info = np.zeros((n_people, 2, 2))
-    np.add.at(total_info, person, info)
-    moment = np.zeros((n_people, 2))
-    np.add.at(moment, person, np.einsum("nij,nj->ni", info, rows.xy))
+
+    def total(values: FloatArray) -> FloatArray:
+        """Per person, the sum of ``values`` (N, ...) over their rows (bincount: ufunc.at is slow)."""
+        flat = values.reshape(len(values), -1)
+        sums = [np.bincount(person, weights=flat[:, k], minlength=n_people) for k in range(flat.shape[1])]
+        return np.stack(sums, axis=1).reshape(n_people, *values.shape[1:])
+
+    total_info = total(info)
+    moment = total(np.einsum("nij,nj->ni", info, rows.xy))
     xy = np.linalg.solve(total_info, moment[:, :, None])[:, :, 0]
     weight = np.sqrt(np.maximum(np.linalg.det(info), 0.0))
-    total = np.bincount(person, weights=weight, minlength=n_people)
+    total_weight = np.bincount(person, weights=weight, minlength=n_people)
 
     def mean(values: FloatArray) -> FloatArray:
-        return np.bincount(person, weights=weight * values, minlength=n_people) / total
+        return np.bincount(person, weights=weight * values, minlength=n_people) / total_weight
 
     score = np.full(n_people, -np.inf)
     np.maximum.at(score, person, rows.score)
-    visible = np.zeros(n_people, dtype=bool)
-    np.logical_or.at(visible, person, ~rows.occluded)
+    visible = np.bincount(person, weights=~rows.occluded, minlength=n_people) > 0
     camera = np.full(n_people, -1, dtype=np.int64)
     alone = n_views[person] == 1
     camera[person[alone]] = rows.camera[alone]

@@ -11,10 +11,18 @@ nanoseconds since the Unix epoch (``*_ns``), pixel boxes as (x0, y0, x1, y1).
 from __future__ import annotations
 
 from datetime import datetime, timezone
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    SerializerFunctionWrapHandler,
+    TypeAdapter,
+    model_serializer,
+    model_validator,
+)
 
 from bevflow.detections import Boxes, Cylinders
 
@@ -77,6 +85,26 @@ class CylinderEstimate(BaseModel):
     radius: Annotated[float, Field(gt=0, allow_inf_nan=False)]
     score: Annotated[float, Field(ge=0, le=1)] = 1.0
     occluded: bool = False
+    covariance: tuple[Finite, Finite, Finite] | None = Field(
+        default=None,
+        description="(xx, xy, yy) covariance of the feet position, m²; absent: the receiver computes it",
+    )
+
+    @model_validator(mode="after")
+    def _covariance_is_positive_definite(self) -> CylinderEstimate:
+        if self.covariance is not None:
+            xx, xy, yy = self.covariance
+            if not (xx > 0 and yy > 0 and xx * yy > xy * xy):
+                raise ValueError(f"covariance {self.covariance} is not positive definite")
+        return self
+
+    @model_serializer(mode="wrap")
+    def _omit_absent_covariance(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
+        # An estimate without one serialises as before the field existed.
+        out = handler(self)
+        if self.covariance is None:
+            out.pop("covariance", None)
+        return out
 
 
 class CameraCylinders(Message):
@@ -89,6 +117,11 @@ class CameraCylinders(Message):
 
     def to_cylinders(self, camera_index: int) -> Cylinders:
         c = self.cylinders
+        covariance = None
+        if any(e.covariance is not None for e in c):
+            nan = (np.nan, np.nan, np.nan)
+            xx, xy, yy = np.asarray([e.covariance or nan for e in c], dtype=np.float64).T
+            covariance = np.stack([np.stack([xx, xy], axis=1), np.stack([xy, yy], axis=1)], axis=1)
         return Cylinders(
             xy=np.asarray([e.xy for e in c], dtype=np.float64).reshape(-1, 2),
             height=[e.height for e in c],
@@ -96,12 +129,19 @@ class CameraCylinders(Message):
             camera=[camera_index] * len(c),
             score=[e.score for e in c],
             occluded=[e.occluded for e in c],
+            covariance=covariance,
         )
 
     @classmethod
     def from_cylinders(cls, camera: str, seq: int, capture_ns: int, cyl: Cylinders) -> CameraCylinders:
         finite = np.isfinite(cyl.xy).all(axis=1) & np.isfinite(cyl.height) & np.isfinite(cyl.radius)
         finite &= (cyl.height > 0) & (cyl.radius > 0)
+        covariance: list[tuple[float, float, float] | None] = [None] * len(cyl)
+        if cyl.covariance is not None:
+            xx, xy, yy = cyl.covariance[:, 0, 0], cyl.covariance[:, 0, 1], cyl.covariance[:, 1, 1]
+            with np.errstate(invalid="ignore", over="ignore"):
+                usable = np.isfinite(cyl.covariance).all(axis=(1, 2)) & (xx > 0) & (yy > 0) & (xx * yy > xy * xy)
+            covariance = [(a, b, c) if ok else None for a, b, c, ok in zip(xx.tolist(), xy.tolist(), yy.tolist(), usable)]
         return cls(
             camera=camera,
             seq=seq,
@@ -113,6 +153,7 @@ class CameraCylinders(Message):
                     radius=float(cyl.radius[i]),
                     score=float(np.clip(cyl.score[i], 0.0, 1.0)),
                     occluded=bool(cyl.occluded[i]),
+                    covariance=covariance[i],
                 )
                 for i in np.flatnonzero(finite)
             ],
@@ -199,7 +240,7 @@ class Contact(BaseModel):
     duration_s: Annotated[float, Field(ge=0, allow_inf_nan=False)]
     min_distance_m: Annotated[float, Field(ge=0, allow_inf_nan=False)]
     closest_ns: Annotated[int, Field(ge=0)]
-    limit_m: Annotated[float, Field(gt=0)]
+    limit_m: Annotated[float, Field(gt=0, allow_inf_nan=False)]
 
 
 # --- events --------------------------------------------------------------------------------------
@@ -220,7 +261,7 @@ class EventBase(Message):
 class DistanceViolation(EventBase):
     type: Literal["distance_violation"] = "distance_violation"
     min_distance_m: Annotated[float, Field(ge=0, allow_inf_nan=False)]
-    limit_m: Annotated[float, Field(gt=0)]
+    limit_m: Annotated[float, Field(gt=0, allow_inf_nan=False)]
     position: Xy | None = Field(default=None, description="midpoint of the pair at the closest approach")
     group: bool = Field(
         default=False,

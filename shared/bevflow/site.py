@@ -58,6 +58,9 @@ class Extrinsics(_Strict):
     tvec: tuple[float, float, float]
 
 
+MONITORED_EDGE_MARGIN_M = 0.5
+
+
 class CameraConfig(_Strict):
     id: Annotated[str, Field(min_length=1, pattern=r"^[A-Za-z0-9_.-]+$")]
     model: Literal["fisheye", "pinhole"] = "fisheye"
@@ -102,6 +105,14 @@ class CameraConfig(_Strict):
             R = cv2.Rodrigues(np.asarray(self.extrinsics.rvec, dtype=np.float64))[0]
             t = np.asarray(self.extrinsics.tvec, dtype=np.float64)
         return make_camera(self.model, self.intrinsics.matrix(), np.asarray(self.distortion), R, t, self.image_size)
+
+    @property
+    def reporting_radius_m(self) -> float | None:
+        """How far from below the camera its detections are used: the monitored radius plus a
+        margin, so a person straddling the circle's edge is not cut in and out of view. Beyond it
+        a fisheye still finds people, but so small and oblique that their feet are off by a metre
+        and fusion can no longer tell them from someone else."""
+        return None if self.monitored_radius_m is None else self.monitored_radius_m + MONITORED_EDGE_MARGIN_M
 
     @property
     def height_m(self) -> float:

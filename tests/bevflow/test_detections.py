@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import doctest
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -189,6 +190,41 @@ def test_cylinders_column_length_errors(column: str, length: int) -> None:
         Cylinders(xy=np.zeros((2, 2)), **{column: np.zeros(length)})
 
 
+def _covariances(n: int, scale: float = 1.0) -> np.ndarray:
+    """(n, 2, 2) distinct covariances: row k is diag(k + 1, 2k + 1) · scale with 0.1 · scale off the diagonal."""
+    k = np.arange(n, dtype=float)
+    return scale * np.stack([np.stack([k + 1, np.full(n, 0.1)], 1), np.stack([np.full(n, 0.1), 2 * k + 1], 1)], 1)
+
+
+def test_cylinders_have_no_covariance_unless_given() -> None:
+    assert _cylinders(3).covariance is None
+    assert Cylinders.merge([_cylinders(2), _cylinders(1)]).covariance is None
+    assert _cylinders(3)[1:].covariance is None
+
+
+@pytest.mark.parametrize(
+    ("index", "rows"),
+    [pytest.param(1, [1], id="int"), pytest.param(np.array([True, False, True]), [0, 2], id="mask")],
+)
+def test_cylinders_indexing_keeps_covariance_rows(index, rows: list[int]) -> None:
+    cov = _covariances(3)
+    picked = replace(_cylinders(3), covariance=cov)[index]
+    np.testing.assert_array_equal(picked.covariance, cov[rows])
+
+
+def test_cylinders_merge_fills_unknown_covariances_with_nan() -> None:
+    a = replace(_cylinders(2), covariance=_covariances(2))
+    merged = Cylinders.merge([a, _cylinders(1, camera=1), Cylinders.empty()])
+    assert merged.covariance.shape == (3, 2, 2)
+    np.testing.assert_array_equal(merged.covariance[:2], _covariances(2))
+    assert np.isnan(merged.covariance[2]).all()
+
+
+def test_cylinders_reject_covariance_of_the_wrong_shape() -> None:
+    with pytest.raises(ValueError, match=r"covariance must have shape \(2, 2, 2\)"):
+        Cylinders(xy=np.zeros((2, 2)), covariance=np.zeros((3, 2, 2)))
+
+
 def test_cylinders_reject_points_that_are_not_n_by_2() -> None:
     with pytest.raises(ValueError):
         Cylinders(xy=np.zeros((2, 3)))
@@ -196,3 +232,17 @@ def test_cylinders_reject_points_that_are_not_n_by_2() -> None:
 
 def test_docstring_examples() -> None:
     assert doctest.testmod(bevflow.detections).failed == 0
+
+
+@pytest.mark.parametrize(
+    "radius, expected",
+    [
+        (None, [True, True, True, True]),
+        (2.0, [True, True, False, True]),  # the unknown feet stay, for fusion to judge
+        (0.5, [True, False, False, True]),
+    ],
+)
+def test_near_keeps_feet_within_the_radius(radius, expected) -> None:
+    xy = np.array([[1.0, 1.0], [2.0, 2.5], [4.0, 1.0], [np.nan, np.nan]])
+    cylinders = Cylinders(xy=xy, height=np.full(4, 1.7), radius=np.full(4, 0.25))
+    assert cylinders.near((1.0, 1.0, 5.5), radius).tolist() == expected

@@ -4,13 +4,14 @@ the fused position and weak views; ceiling fisheyes (the paper's case) and side-
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from bevflow.camera import FisheyeCamera, PinholeCamera, rotation_from_ypr
 from bevflow.detections import Cylinders
-from bevflow.fusion import PositionNoise, fuse_cylinders, position_covariance
+from bevflow.fusion import PositionNoise, fuse_cylinders, position_covariance, with_position_covariance
 
 PAPER = {"noise": None}  # the paper's rule: feet closer than 0.45 m
 DEFAULT: dict = {}
@@ -86,6 +87,39 @@ def test_feet_the_camera_cannot_see_fall_back_to_the_floor_term():
 def test_covariance_needs_per_camera_cylinders():
     with pytest.raises(ValueError, match="camera index -1"):
         position_covariance(Cylinders(xy=[[0.0, 0.0]], camera=[-1]), TWO)
+
+
+def test_covariance_is_exactly_symmetric_and_carried_by_with_position_covariance():
+    seen = Cylinders(xy=[[0.3, 9.0], [2.2, 0.7], [1.4, -0.9]], camera=[0, 1, 1], occluded=[False, True, False])
+    cameras = [CROSSED[0], TWO[0]]
+    cov = position_covariance(seen, cameras)
+    np.testing.assert_array_equal(cov, cov.transpose(0, 2, 1))
+    assert (cov[:, 0, 1] != 0).any()  # not symmetric by being diagonal
+    carried = with_position_covariance(seen, cameras)
+    np.testing.assert_array_equal(carried.covariance, cov)
+    np.testing.assert_array_equal(carried.xy, seen.xy)
+
+
+# --- covariances carried by the cylinders ----------------------------------------------------------------
+def test_carried_covariances_are_used_instead_of_the_geometry():
+    # 0.8 m apart: too far for the fisheyes' own covariances, but within the gate of wide ones.
+    seen = Cylinders(xy=[[2.0, 0.0], [2.8, 0.0]], camera=[0, 1])
+    assert fuse_cylinders(seen, TWO).n_views.tolist() == [1, 1]
+    wide = replace(seen, covariance=np.broadcast_to(np.eye(2), (2, 2, 2)))
+    assert fuse_cylinders(wide, TWO).n_views.tolist() == [2]
+    assert fuse_cylinders(wide, TWO, noise=None).n_views.tolist() == [1, 1]  # the paper's rule ignores them
+
+
+@pytest.mark.parametrize("known", [[True, True, True, True], [True, False, True, False], [False] * 4])
+def test_rows_without_a_carried_covariance_get_the_computed_one(known):
+    rng = np.random.default_rng(3)
+    seen = Cylinders(xy=rng.uniform(1.0, 3.0, (4, 2)), camera=[0, 1, 2, 1], occluded=[False, True, False, False])
+    carried = with_position_covariance(seen, THREE).covariance.copy()
+    carried[~np.asarray(known)] = np.nan
+    expected = fuse_cylinders(seen, THREE)
+    got = fuse_cylinders(replace(seen, covariance=carried), THREE)
+    np.testing.assert_array_equal(got.assignment, expected.assignment)
+    np.testing.assert_array_equal(got.fused.xy, expected.fused.xy)
 
 
 @pytest.mark.parametrize(
@@ -327,3 +361,38 @@ def test_dense_tangled_crowd_keeps_the_rules(mode, seed):
                 assert linked
     # and pairs that could have joined mostly did: far fewer rows than cylinders
     assert len(fusion.fused) < 0.75 * len(xy)
+
+
+def greedy_cliques(xy, camera, cov, distance_m=0.45, gate_chi2=9.21, max_gate_m=2.0):
+    """The grouping rule written out over all pairs: join groups along linked pairs of distinct
+    cameras, surest pair first, when every cross pair is linked. A set of frozensets of rows."""
+    n = len(xy)
+    d = xy[:, None] - xy[None]
+    gap = np.linalg.norm(d, axis=2)
+    d2 = np.einsum("abi,abij,abj->ab", d, np.linalg.inv(cov[:, None] + cov[None]), d)
+    depth = np.minimum((gap / distance_m) ** 2, np.where(gap < max_gate_m, d2 / gate_chi2, np.inf))
+    linked = (depth < 1.0) & (camera[:, None] != camera[None])
+    group = list(range(n))
+    members = {k: {k} for k in range(n)}
+    i, j = np.nonzero(np.triu(linked, 1))
+    for a, b in sorted(zip(i.tolist(), j.tolist()), key=lambda p: depth[p]):
+        ga, gb = group[a], group[b]
+        if ga == gb or {camera[k] for k in members[ga]} & {camera[k] for k in members[gb]}:
+            continue
+        if all(linked[p, q] for p in members[ga] for q in members[gb]):
+            members[ga] |= members.pop(gb)
+            for k in members[ga]:
+                group[k] = ga
+    return {frozenset(m) for m in members.values()}
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_grouping_follows_the_greedy_rule_pair_by_pair(seed):
+    rng = np.random.default_rng(seed)
+    cameras = ceiling((0.0, 0.0), (3.0, 0.0), (0.0, 3.0), (3.0, 3.0))
+    people = rng.uniform(0.0, 3.0, (40, 2))
+    camera = np.repeat(np.arange(4), len(people))
+    seen = Cylinders(xy=np.tile(people, (4, 1)) + rng.normal(0.0, 0.15, (4 * len(people), 2)), camera=camera)
+    assignment = fuse_cylinders(seen, cameras).assignment
+    groups = {frozenset(np.flatnonzero(assignment == row).tolist()) for row in range(assignment.max() + 1)}
+    assert groups == greedy_cliques(seen.xy, camera, position_covariance(seen, cameras))

@@ -98,6 +98,40 @@ def test_cylinders_with_non_finite_size_are_dropped_too() -> None:
     assert len(CameraCylinders.from_cylinders("cam-b", seq=1, capture_ns=99, cyl=cyl).cylinders) == 1
 
 
+def test_cylinder_covariances_cross_the_wire_exactly() -> None:
+    cov = np.array([[[0.04, 0.013], [0.013, 0.09]], [[0.1, -0.0301], [-0.0301, 0.02]]])
+    cyl = Cylinders(xy=[[1.0, 2.0], [3.0, 4.0]], covariance=cov)
+    message = CameraCylinders.from_cylinders("cam-b", seq=1, capture_ns=99, cyl=cyl)
+    assert [c.covariance for c in message.cylinders] == [(0.04, 0.013, 0.09), (0.1, -0.0301, 0.02)]
+    back = CameraCylinders.model_validate_json(message.model_dump_json()).to_cylinders(camera_index=0)
+    np.testing.assert_array_equal(back.covariance, cov)
+
+
+def test_cylinders_without_covariance_serialise_as_before() -> None:
+    message = CameraCylinders.from_cylinders("cam-b", seq=1, capture_ns=99, cyl=Cylinders(xy=[[1.0, 2.0]]))
+    assert "covariance" not in json.loads(message.model_dump_json())["cylinders"][0]
+    assert message.to_cylinders(camera_index=0).covariance is None
+
+
+def test_unusable_covariances_are_left_for_the_receiver() -> None:
+    cov = np.array([[[0.04, 0.0], [0.0, 0.09]], [[NAN, 0.0], [0.0, 0.09]], [[0.01, 0.2], [0.2, 0.01]]])
+    cyl = Cylinders(xy=[[1.0, 2.0], [3.0, 4.0], [5.0, 6.0]], covariance=cov)
+    message = CameraCylinders.from_cylinders("cam-b", seq=1, capture_ns=99, cyl=cyl)
+    assert [c.covariance for c in message.cylinders] == [(0.04, 0.0, 0.09), None, None]
+    back = message.to_cylinders(camera_index=0).covariance
+    np.testing.assert_array_equal(back[0], cov[0])
+    assert np.isnan(back[1:]).all()  # fusion computes these rows
+
+
+@pytest.mark.parametrize(
+    "covariance", [(0.0, 0.0, 1.0), (1.0, 0.0, -1.0), (1.0, 2.0, 1.0), (1.0, NAN, 1.0)],
+    ids=["zero-variance", "negative", "not-positive-definite", "nan"],
+)
+def test_a_covariance_that_is_not_positive_definite_is_refused(covariance) -> None:
+    with pytest.raises(ValidationError):
+        CylinderEstimate(xy=(0.0, 0.0), height=1.7, radius=0.3, covariance=covariance)
+
+
 # --- events -------------------------------------------------------------------------------------
 EVENTS = [
     pytest.param(

@@ -21,7 +21,7 @@ from bevflow.analytics.intervals import CrowdedIntervalTracker
 from bevflow.analytics.occupancy import OccupancyCounter
 from bevflow.analytics.positions import IntArray, check_positions, seconds_to_ns
 from bevflow.analytics.trajectories import TrackHistory, Trajectory
-from bevflow.analytics.zones import BoolArray, ZoneIndex, zones_by_track
+from bevflow.analytics.zones import BoolArray, ZoneIndex, zone_lists, zones_by_track
 from bevflow.schemas import Contact, CrowdedInterval, DistanceViolation, Occupancy, OverCapacity
 from bevflow.site import Site
 
@@ -43,6 +43,11 @@ class AnalyticsTick:
     def zones_by_track(self) -> dict[int, list[str]]:
         """Track id -> the ids of the zones it stands in (built on first use)."""
         return zones_by_track(self.ids, self.inside, self.zone_ids)
+
+    @cached_property
+    def zones_by_row(self) -> list[list[str]]:
+        """The ids of the zones each track stands in, in the order of ``ids`` (built on first use)."""
+        return zone_lists(self.inside, self.zone_ids)
 
 
 class SiteAnalytics:

@@ -102,7 +102,34 @@ class ZoneIndex:
         return [self.ids[z] if inside[n, z] else None for n, z in enumerate(first)]
 
 
+def zone_lists(inside: BoolArray, zone_ids: Sequence[str]) -> list[list[str]]:
+    """For each row of an (N, Z) membership matrix, the ids of its zones (in ``zone_ids`` order),
+    each a list of its own.
+
+    >>> zone_lists(np.array([[True, False], [True, True], [True, False]]), ["hall", "bar"])
+    [['hall'], ['hall', 'bar'], ['hall']]
+    """
+    inside = np.asarray(inside, dtype=bool)
+    if inside.ndim != 2 or inside.shape[1] != len(zone_ids):
+        raise ValueError(f"membership matrix has shape {inside.shape}, expected (N, {len(zone_ids)})")
+    n, z = inside.shape
+    if n == 0 or z == 0:
+        return [[] for _ in range(n)]
+    if z > 64:
+        names = np.asarray(zone_ids, dtype=object)
+        return [names[row].tolist() for row in inside]
+    # People stand in few combinations of zones: name each combination once (found by packing a
+    # row's bits into one uint64) rather than every person's row.
+    packed = np.zeros((n, 8), np.uint8)
+    packed[:, : (z + 7) // 8] = np.packbits(inside, axis=1)
+    _, first, which = np.unique(packed.view(np.uint64).ravel(), return_index=True, return_inverse=True)
+    names = [[zone_ids[k] for k in np.flatnonzero(inside[row])] for row in first.tolist()]
+    return [list(names[k]) for k in which.reshape(-1).tolist()]
+
+
 def zones_by_track(ids: IntArray, inside: BoolArray, zone_ids: Sequence[str]) -> dict[int, list[str]]:
     """Track id -> ids of the zones it stands in, from an (N, Z) membership matrix."""
-    names = np.asarray(zone_ids, dtype=object)
-    return {int(t): names[row].tolist() for t, row in zip(ids, inside, strict=True)}
+    ids = np.asarray(ids).reshape(-1)
+    if len(ids) != len(inside):
+        raise ValueError(f"{len(ids)} track ids but {len(inside)} membership rows")
+    return dict(zip(ids.tolist(), zone_lists(inside, zone_ids), strict=True))

@@ -67,6 +67,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from bevflow.camera import Camera
 from bevflow.cylinder import METHODS, fit_cylinders
 from bevflow.detections import Boxes, Cylinders
 from bevflow.evaluation.rendered import RenderedDetector, attribute
@@ -235,7 +236,7 @@ def detect(sequence: SimulatedSequence, noise: DetectorNoise, seed: int, methods
             cylinders[m].append([])
         for c, (camera, view) in enumerate(zip(cameras, views, strict=True)):
             if sequence.detected is not None:
-                boxes = sequence.detected[k][c]
+                boxes = _in_reach(sequence.detected[k][c], camera, site.cameras[c].reporting_radius_m)
                 source = attribute(boxes, view)
             else:
                 noisy = apply_detector_noise(view.boxes, noise, view_rng(seed, k, c), camera.image_size, visible=view.boxes.xyxy)
@@ -252,6 +253,12 @@ def detect(sequence: SimulatedSequence, noise: DetectorNoise, seed: int, methods
     return {
         m: Detections(cylinders[m], [np.concatenate(e) if e else np.zeros(0) for e in errors[m]], truth) for m in methods
     }
+
+
+def _in_reach(boxes: Boxes, camera: Camera, radius_m: float | None) -> Boxes:
+    """The boxes the live projector keeps: a real detector sees people far past the monitored
+    circle that the simulator's boxes keep to, and the projector drops those (by their cylinder)."""
+    return boxes[fit_cylinders(camera, boxes).near(camera.center, radius_m)]
 
 
 def ground_truth(

@@ -65,7 +65,7 @@ class TickAssembler(Generic[T]):
         self.max_wait_ns = max_wait_ns
         self.max_future_ns = max_future_ns
         self.stale_ns = stale_ns
-        self._heard_ns: dict[str, int] = {}  # camera -> arrival time of its last accepted message
+        self._heard_ns: dict[str, int] = {}  # camera -> arrival time of its last accepted or late message
         self._slots: dict[int, Tick[T]] = {}
         self._released_until_ns: int | None = None  # every slot starting before this is gone
         self.counts: Counter[str] = Counter()
@@ -73,9 +73,12 @@ class TickAssembler(Generic[T]):
     def push(self, camera: str, capture_ns: int, item: T, now_ns: int) -> PushResult:
         result = self._classify(camera, capture_ns, now_ns)
         self.counts[result] += 1
+        if result in ("accepted", "late"):
+            # A late camera is alive, only slow: it must still be waited for, or once it falls
+            # out of the live set every tick closes without it and all it sends arrives late.
+            self._heard_ns[camera] = now_ns
         if result != "accepted":
             return result
-        self._heard_ns[camera] = now_ns
         start = capture_ns - capture_ns % self.period_ns
         slot = self._slots.setdefault(start, Tick(start, self.period_ns))
         if capture_ns >= slot.capture_ns.get(camera, -1):

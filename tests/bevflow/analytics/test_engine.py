@@ -43,6 +43,7 @@ def test_one_call_per_tick_gives_every_analytic() -> None:
     assert (first.occupancy.total, [z.count for z in first.occupancy.zones]) == (4, [3, 1])
     assert [(type(e), e.zone, e.start_ns) for e in first.events] == [(OverCapacity, "bar", 0)]
     assert first.zones_by_track == {11: ["bar"], 12: ["bar"], 13: ["bar"], 20: ["stage"]}
+    assert first.zones_by_row == [["bar"], ["bar"], ["bar"], ["stage"]]  # in the order of the ids given
     assert first.violations.shape == (0, 2)
 
     # 11-12 (1 m) and 12-13 (2.9 m: no) -> one violation at 2 s; 11-13 is 3.5 m apart.

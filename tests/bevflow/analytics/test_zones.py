@@ -5,7 +5,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bevflow.analytics.zones import PolygonSet, ZoneIndex, points_in_polygons, zones_by_track
+from bevflow.analytics.zones import PolygonSet, ZoneIndex, points_in_polygons, zone_lists, zones_by_track
 from bevflow.site import Zone
 
 SQUARE = [(0.0, 0.0), (2.0, 0.0), (2.0, 2.0), (0.0, 2.0)]
@@ -118,3 +118,45 @@ def test_zone_index_names_columns_and_finds_first_zone() -> None:
     assert zones.first_zone([(3, 3), (21.5, 0.5), (-5, -5), (8, 1)]) == ["hall", "exit", None, "hall"]
     inside = zones.contains([(3, 3), (21.5, 0.5), (-5, -5)])
     assert zones_by_track(np.array([12, 4, 9]), inside, zones.ids) == {12: ["hall", "stand"], 4: ["exit"], 9: []}
+
+
+@pytest.mark.parametrize(
+    ("inside", "zone_ids", "expected"),
+    [
+        pytest.param(np.zeros((0, 2), bool), ["a", "b"], [], id="nobody"),
+        pytest.param(np.zeros((2, 0), bool), [], [[], []], id="no-zones"),
+        pytest.param([[True, False], [False, False], [True, True], [True, False]], ["a", "b"],
+                     [["a"], [], ["a", "b"], ["a"]], id="combinations"),
+        pytest.param(np.eye(3, 70, 66, dtype=bool), [f"z{k}" for k in range(70)], [["z66"], ["z67"], ["z68"]],
+                     id="more-zones-than-bits-in-a-word"),
+        pytest.param(np.eye(3, 64, 61, dtype=bool), [f"z{k}" for k in range(64)], [["z61"], ["z62"], ["z63"]],
+                     id="sixty-four-zones"),
+    ],
+)
+def test_zone_lists_name_each_rows_zones(inside, zone_ids, expected) -> None:
+    assert zone_lists(np.asarray(inside, bool), zone_ids) == expected
+
+
+def test_zone_lists_are_independent_lists() -> None:
+    first, second = zone_lists(np.array([[True], [True]]), ["a"])
+    first.append("changed")
+    assert second == ["a"]
+
+
+@pytest.mark.parametrize("inside", [np.zeros((2, 3), bool), np.zeros(2, bool)], ids=["too-wide", "flat"])
+def test_zone_lists_refuse_a_matrix_that_does_not_match_the_zones(inside) -> None:
+    with pytest.raises(ValueError, match="membership matrix"):
+        zone_lists(inside, ["a", "b"])
+
+
+def test_zones_by_track_needs_one_row_per_track() -> None:
+    with pytest.raises(ValueError, match="2 track ids but 1 membership rows"):
+        zones_by_track(np.array([1, 2]), np.zeros((1, 1), bool), ["a"])
+
+
+@settings(max_examples=60, deadline=None)
+@given(zones=st.integers(1, 80), people=st.integers(0, 40), seed=st.integers(0, 2**32 - 1))
+def test_zone_lists_match_reading_each_row(zones: int, people: int, seed: int) -> None:
+    inside = np.random.default_rng(seed).random((people, zones)) < 0.3
+    ids = [f"z{k}" for k in range(zones)]
+    assert zone_lists(inside, ids) == [[ids[z] for z in np.flatnonzero(row)] for row in inside]

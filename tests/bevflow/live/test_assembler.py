@@ -102,3 +102,17 @@ def test_a_camera_silent_for_longer_than_stale_is_no_longer_waited_for() -> None
     a.push("a", 3010 * MS, "a2", now_ns=3010 * MS)  # b has been silent for 2 s
     (tick,) = a.pop_ready(now_ns=3010 * MS)
     assert tick.items == {"a": "a2"}
+
+
+def test_a_camera_whose_results_arrive_late_is_waited_for_again() -> None:
+    # b's results take 300 ms to arrive, more than max_wait: its first ones miss their ticks, but
+    # they show b is alive, so later ticks wait for it instead of dropping everything it sends.
+    a = TickAssembler(["a", "b"], period_ns=100 * MS, max_wait_ns=400 * MS, stale_ns=1000 * MS)
+    a.push("a", 1000 * MS, "a1", now_ns=1000 * MS)
+    a.pop_ready(now_ns=1000 * MS)  # b never heard: the first tick leaves with a alone
+    assert a.push("b", 1000 * MS, "b1", now_ns=1300 * MS) == "late"
+    a.push("a", 1400 * MS, "a2", now_ns=1400 * MS)
+    assert a.pop_ready(now_ns=1400 * MS) == []  # now b is waited for
+    assert a.push("b", 1400 * MS, "b2", now_ns=1700 * MS) == "accepted"
+    (tick,) = a.pop_ready(now_ns=1700 * MS)
+    assert tick.items == {"a": "a2", "b": "b2"}

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from bevflow.detections import Cylinders
+from bevflow.fusion import with_position_covariance
 from bevflow.live.site_tracker import SiteTracker
 from bevflow.site import parse_site
 
@@ -63,3 +64,29 @@ def test_first_id_continues_a_previous_run(site) -> None:
 def test_a_tick_without_cameras_is_valid(site) -> None:
     step = SiteTracker(site).step(T0, {})
     assert step.tracks.tracks == [] and step.occupancy.total == 0
+
+
+def test_cameras_are_listed_in_site_order_whatever_order_they_report_in(site) -> None:
+    tracker = SiteTracker(site)
+    for k in range(4):
+        step = tracker.step(T0 + k * S // 10, {"east": seen((3.1, 0.05)), "west": seen((3.0, 0.0))})
+    assert [t.cameras for t in step.tracks.tracks] == [["west", "east"]]
+    np.testing.assert_array_equal(step.fusion.assignment, [0, 0])
+
+
+def test_cylinders_carrying_their_covariance_track_exactly_as_bare_ones(site) -> None:
+    rng = np.random.default_rng(5)
+    people = rng.uniform([-1.0, -3.0], [7.0, 3.0], (12, 2))
+    cameras = [site.camera(c) for c in site.camera_ids]
+    bare, carried = SiteTracker(site), SiteTracker(site)
+    for k in range(8):
+        per_camera = {
+            c: Cylinders(xy=people + 0.1 * k + rng.normal(0.0, 0.05, people.shape), camera=np.full(len(people), i),
+                         occluded=rng.random(len(people)) < 0.2)
+            for i, c in enumerate(site.camera_ids)
+        }
+        expected = bare.step(T0 + k * S // 10, per_camera)
+        got = carried.step(T0 + k * S // 10, {c: with_position_covariance(p, cameras) for c, p in per_camera.items()})
+        assert got.tracks == expected.tracks and got.occupancy == expected.occupancy
+        np.testing.assert_array_equal(got.fusion.assignment, expected.fusion.assignment)
+    assert len(got.tracks.tracks) == len(people)

@@ -61,3 +61,17 @@ def test_every_height_and_thread_count_gets_a_row(monkeypatch: pytest.MonkeyPatc
     assert all(r["boxes"] == 2 and r["ms_p50"] >= 0 for r in result["rows"])
     assert lookup(result, 3.3, 2) == result["rows"][1]["ms_p50"]
     assert lookup(result, 5.5, 2) is None
+
+
+def test_rendering_is_timed_per_camera_at_the_detectors_scale() -> None:
+    from bevflow.sim.render_feed import detector_frame_size
+    from bevflow.site import load_site_or_builtin
+
+    result = detector_bench.bench_rendering("demo-hall", people=10, frames=2, warmup=1, cameras=("hall-5",))
+    assert [r["camera"] for r in result["rows"]] == ["hall-5"]
+    site = load_site_or_builtin("demo-hall")
+    for row in result["rows"]:
+        assert row["frame"] == "{}x{}".format(*detector_frame_size(site, row["camera"]))
+        assert 0 < row["ms_p50"] <= row["ms_p90"]
+        assert row["people_shown"] >= 0
+    assert result["people"] == 10 and result["frames"] == 2

@@ -66,11 +66,32 @@ def test_keeps_up(changes: dict, ok: bool, why: str) -> None:
 def test_max_cameras_search(monkeypatch: pytest.MonkeyPatch, limit: int, steps: list[int], bisect: bool,
                             best: int | None, lower_bound: bool, probed: list[int]) -> None:
     # A machine that keeps up with at most ``limit`` cameras; ``first`` is reused for 4 cameras.
-    def fake_measure(duration_s: float, people: object, warmup_s: float, cameras: int) -> dict:
+    asked: set[str] = set()
+
+    def fake_measure(duration_s: float, people: object, warmup_s: float, cameras: int, boxes: str = "simulated") -> dict:
+        asked.add(boxes)
         return run(cameras=cameras, frames_dropped_at_source=0 if cameras <= limit else 5)
 
     monkeypatch.setattr(live, "measure", fake_measure)
     first = fake_measure(1.0, None, 0.0, 4)
-    result = max_cameras(steps, 1.0, 0.0, first=first, bisect=bisect)
+    asked.clear()
+    result = max_cameras(steps, 1.0, 0.0, first=first, bisect=bisect, boxes="rendered")
+    assert asked <= {"rendered"}
     assert result["max_cameras"] == best and result["lower_bound_only"] is lower_bound
     assert [p["cameras"] for p in result["probes"]] == probed
+
+
+def test_detection_log_counts_frames_the_detector_skipped_and_their_age() -> None:
+    from bevflow.schemas import Detections2D
+
+    log = live.DetectionLog()
+    now = __import__("time").time_ns()
+    log.on_detections(Detections2D(camera="a", seq=1, capture_ns=now))  # before recording: ignored
+    log.recording = True
+    for camera, seqs in {"a": [3, 4, 7], "b": [10, 12]}.items():
+        for seq in seqs:
+            log.on_detections(Detections2D(camera=camera, seq=seq, capture_ns=now - 50_000_000))
+    summary = log.summary()
+    assert summary["frames_detected"] == 5
+    assert summary["frames_skipped_by_detector"] == 2 + 1  # a: 5, 6; b: 11
+    assert 50.0 <= summary["detections_latency_p50_ms"] < 5000.0

@@ -16,6 +16,7 @@ from bevflow_services.benchmarks.tracking import (
     observe,
     stage_clock,
     walk,
+    with_projector_covariance,
 )
 
 
@@ -87,3 +88,25 @@ def test_stage_clock_times_the_stages_and_puts_everything_back() -> None:
     assert {k: len(v) for k, v in clock.seconds.items()} == {"fusion": 2, "tracker": 2, "analytics": 2}
     assert site_tracker_module.fuse_cylinders is fuse
     assert "update" not in vars(tracker.tracker) and tracker.tracker.update == update
+
+
+def test_covariances_from_the_projector_track_exactly_as_those_fusion_computes() -> None:
+    rows = {source: bench_tick(people=30, cameras=4, ticks=4, warmup=4, covariance=source) for source in ("projector", "fusion")}
+    assert rows["projector"]["covariance"] == "projector" and rows["fusion"]["covariance"] == "fusion"
+    for key in ("MOTA", "IDF1", "open_violations_per_tick", "events_per_tick", "cylinders_per_tick"):
+        assert rows["projector"][key] == rows["fusion"][key], key
+
+
+def test_projector_covariance_is_attached_to_every_camera() -> None:
+    site = grid_site(4, people=5)
+    per_camera = observe(site, np.array([[5.0, 5.0], [12.0, 14.0]]), np.random.default_rng(0))
+    carried = with_projector_covariance(site, per_camera)
+    assert carried.keys() == per_camera.keys()
+    for camera, cylinders in carried.items():
+        assert cylinders.covariance.shape == (len(per_camera[camera]), 2, 2)
+        np.testing.assert_array_equal(cylinders.camera, site.camera_index(camera))
+
+
+def test_bench_tick_refuses_an_unknown_covariance_source() -> None:
+    with pytest.raises(ValueError, match="covariance must be one of"):
+        bench_tick(people=5, cameras=4, ticks=1, warmup=1, covariance="nowhere")
