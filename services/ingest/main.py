@@ -157,7 +157,7 @@ def simulate_frames(session, keys: bus.Keys, site: Site, cameras: list[str], arg
             header = FrameHeader(camera=camera, seq=scene_frame.index // every, capture_ns=capture_ns, width=w, height=h)
             publications[camera].put(bus.Frame(header, image))
         truth_out.put(SimulatedTruth(
-            site=site.site, frame=scene_frame.index, capture_ns=capture_ns, tracks=truth.track_ids.tolist(),
+            site=site.site, frame=scene_frame.index // every, capture_ns=capture_ns, tracks=truth.track_ids.tolist(),
             positions=[(float(x), float(y)) for x, y in truth.feet_xy]))
     for publication in [*publications.values(), truth_out]:
         publication.close()

@@ -25,13 +25,14 @@ class FakeGroup:
 @pytest.mark.parametrize(
     ("options", "expected"),
     [
-        ({}, [("tracker", ("--max-wait-ms", "400")), ("projector", ()), ("recorder", ("--db", "{log}/history.db")),
+        ({}, [("tracker", ("--id-file", "{log}/tracker-next-id", "--max-wait-ms", "1000")), ("projector", ()), ("recorder", ("--db", "{log}/history.db")),
               ("gateway", ("--port", "8123", "--db", "{log}/history.db", "--auth", "off")), ("detector", ()), ("ingest", ("--simulate", "--render"))]),
         ({"boxes": "simulated", "history_db": None},
-         [("tracker", ()), ("projector", ()), ("gateway", ("--port", "8123", "--auth", "off")), ("ingest", ("--simulate",))]),
+         [("tracker", ("--id-file", "{log}/tracker-next-id")), ("projector", ()), ("gateway", ("--port", "8123", "--auth", "off")),
+          ("ingest", ("--simulate",))]),
         ({"history_db": "/data/h.db", "detector_args": ("--threads", "1"), "ingest_args": ("--people", "5"),
           "gateway_args": ("--no-view3d", "--auth", "on"), "tracker_args": ("--tick-ms", "200")},
-         [("tracker", ("--tick-ms", "200")), ("projector", ()), ("recorder", ("--db", "/data/h.db")),
+         [("tracker", ("--id-file", "{log}/tracker-next-id", "--tick-ms", "200")), ("projector", ()), ("recorder", ("--db", "/data/h.db")),
           ("gateway", ("--port", "8123", "--db", "/data/h.db", "--no-view3d", "--auth", "on")), ("detector", ("--threads", "1")),
           ("ingest", ("--simulate", "--render", "--people", "5"))]),
     ],

@@ -49,10 +49,10 @@ def port_pair() -> int:
 @pytest.mark.parametrize(
     ("argv", "boxes", "history_db", "ingest_args"),
     [
-        ([], "rendered", TEMPORARY_DB, ()),
+        ([], "rendered", TEMPORARY_DB, ("--camera-fps", "2.0")),
         (["--boxes", "simulated", "--people", "12"], "simulated", TEMPORARY_DB, ("--people", "12")),
-        (["--no-history-db"], "rendered", None, ()),
-        (["--history-db", "/tmp/x.db"], "rendered", "/tmp/x.db", ()),
+        (["--no-history-db", "--camera-fps", "5"], "rendered", None, ("--camera-fps", "5.0")),
+        (["--history-db", "/tmp/x.db", "--people", "3"], "rendered", "/tmp/x.db", ("--people", "3", "--camera-fps", "2.0")),
     ],
 )
 def test_the_demo_runs_the_detector_on_rendered_frames_by_default(started: list[dict], tmp_path: Path, argv: list[str],
@@ -61,6 +61,13 @@ def test_the_demo_runs_the_detector_on_rendered_frames_by_default(started: list[
     code = main(["demo", "--port", str(port), "--duration", "0", "--log-dir", str(tmp_path), *argv])
     assert code == 0
     assert started == [{"site": "demo-hall", "port": port, "boxes": boxes, "history_db": history_db, "ingest_args": ingest_args}]
+
+
+def test_camera_fps_is_refused_without_rendered_frames(started: list[dict], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    code = main(["demo", "--port", str(port_pair()), "--boxes", "simulated", "--camera-fps", "5", "--log-dir", str(tmp_path)])
+    assert code == 2
+    assert "--camera-fps sets the rate of rendered frames" in capsys.readouterr().err
+    assert started == []
 
 
 def test_contradicting_history_options_are_refused(started: list[dict], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:

@@ -36,6 +36,23 @@ def test_render_needs_the_simulation() -> None:
         ingest.main(args_for("--render"))
 
 
+@pytest.mark.parametrize(
+    ("camera_fps", "expected"),
+    [(None, 1), (10.0, 1), (5.0, 2), (2.0, 5), (3.0, 3), (0.0, UserError), (12.0, UserError)],
+)
+def test_camera_fps_publishes_every_nth_scene_frame(camera_fps, expected) -> None:
+    if expected is UserError:
+        with pytest.raises(UserError, match="--camera-fps must be above 0 and at most the scene's 10 fps"):
+            ingest.camera_frame_stride(10.0, camera_fps)
+    else:
+        assert ingest.camera_frame_stride(10.0, camera_fps) == expected
+
+
+def test_camera_fps_needs_rendered_frames() -> None:
+    with pytest.raises(UserError, match="--camera-fps.*--simulate --render"):
+        ingest.main(args_for("--simulate", "--camera-fps", "2"))
+
+
 def test_rendered_frames_come_in_step_with_the_ground_truth() -> None:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     publisher = bus.open_session(bus.BusConfig(listen=(endpoint,)))
@@ -55,7 +72,7 @@ def test_rendered_frames_come_in_step_with_the_ground_truth() -> None:
             bus.subscribe(listener, keys.truth, bus.JsonCodec(SimulatedTruth), keep(truths))]
     stop = threading.Event()
     worker = threading.Thread(target=ingest.simulate_frames,
-                              args=(publisher, keys, SITE, ["a", "b"], args_for("--simulate", "--render", "--people", "4"), stop))
+                              args=(publisher, keys, SITE, ["a", "b"], args_for("--simulate", "--render", "--people", "4", "--camera-fps", "5"), stop))
     try:
         time.sleep(0.3)  # let the subscriptions reach the publisher
         worker.start()
