@@ -8,6 +8,10 @@ export async function getJson(path, { timeoutMs = 5000 } = {}) {
   const timer = setTimeout(() => abort.abort(), timeoutMs);
   try {
     const response = await fetch(path, { signal: abort.signal, headers: { Accept: "application/json" } });
+    if (response.status === 401) {
+      // The session ended (expired, or logged out elsewhere): log in again, then come back here.
+      location.assign(`/login.html?next=${encodeURIComponent(location.pathname + location.search)}`);
+    }
     if (!response.ok) {
       const body = await response.json().catch(() => ({}));
       throw new ApiError(`${path}: HTTP ${response.status} ${body.message || body.detail || ""}`.trim());

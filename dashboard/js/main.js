@@ -15,6 +15,7 @@ import { FloorMap } from "./map.js";
 import { renderOccupancy } from "./occupancy.js";
 import { PeopleList } from "./people.js";
 import { PersonPanel } from "./person.js";
+import { showSession } from "./session.js";
 
 const $ = (id) => document.getElementById(id);
 const OCCUPANCY_MS = 1000;
@@ -62,6 +63,7 @@ async function boot() {
   const zones = new Map(site.zones.map((z) => [z.id, z]));
   const zoneName = (id) => zones.get(id)?.name || id;
   $("site-name").textContent = site.site;
+  await showSession({ badge: $("session"), calibrationLink: $("calibration-link") });
   let latestNs = null;
   let selected = null;
 

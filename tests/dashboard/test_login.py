@@ -78,3 +78,38 @@ def test_the_setup_link_creates_the_first_admin(tab: Page, secured_gateway) -> N
         access.store.remove_user("chief") if access.store.user("chief") else None
         for name, role, password_hash, created_ns in saved:
             access.store.add_user(name, role, password_hash, created_ns)
+
+
+def log_in(tab: Page, base: str, name: str) -> None:
+    tab.goto(f"{base}/login.html")
+    tab.wait_for("document.body.dataset.ready === 'true'", what="the login page")
+    fill(tab, "login-form", name=name, password=PASSWORD)
+    tab.wait_for("location.pathname === '/' && window.bevflow && window.bevflow.ready && window.bevflow.alerts > 0",
+                 timeout_s=15, what="the live dashboard")
+
+
+@pytest.mark.parametrize(
+    ("name", "acknowledge_shown", "calibration_shown"),
+    [("viewer", False, False), ("operator", True, False), ("admin", True, True)],
+)
+def test_the_dashboard_shows_who_is_logged_in_and_offers_only_what_their_role_may_do(
+    tab: Page, secured_gateway, name: str, acknowledge_shown: bool, calibration_shown: bool
+) -> None:
+    base, _ = secured_gateway
+    log_in(tab, base, name)
+    assert tab.evaluate("document.getElementById('session').hidden") is False
+    assert tab.evaluate("document.querySelector('#session .session-name').textContent") == f"{name} · {name}"
+    shown = "(b) => b.offsetParent !== null"
+    assert tab.evaluate(f"[...document.querySelectorAll('.ack-button')].some({shown})") is acknowledge_shown
+    assert tab.evaluate("!document.getElementById('calibration-link').hidden") is calibration_shown
+    tab.click("#logout")
+    tab.wait_for("location.pathname === '/login.html' && document.body.dataset.ready === 'true'", what="the login page")
+    assert tab.evaluate("fetch('/api/auth/me').then((r) => r.status)") == 401
+
+
+def test_an_ended_session_sends_the_dashboard_back_to_the_login_page(tab: Page, secured_gateway) -> None:
+    base, _ = secured_gateway
+    log_in(tab, base, "viewer")
+    tab.evaluate("fetch('/api/auth/logout', {method: 'POST'}).then((r) => r.status)")  # as if it expired
+    tab.wait_for("location.pathname === '/login.html'", timeout_s=10, what="the login page")
+    assert tab.evaluate("new URLSearchParams(location.search).get('next')") == "/"
