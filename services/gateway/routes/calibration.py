@@ -46,6 +46,7 @@ from bevflow.calibration.extrinsics import (
 )
 from bevflow.calibration.floor_grid import BACKGROUND, floor_extent, render_floor_grid
 from bevflow.camera import Camera
+from bevflow.detections import Cylinders
 from bevflow.planning import PlanError, usable_radius
 from bevflow.schemas import CalibrationDrift, CameraCylinders, FrameHeader, iso_utc
 from bevflow.site import Site, SiteError, load_site
@@ -79,7 +80,7 @@ class CalibrationInputs:
         self.fetch_frame = fetch_frame
         self._lock = threading.Lock()
         self._frames: dict[str, tuple[FrameHeader, np.ndarray]] = {}
-        self._ticks: OrderedDict[int, dict[str, CameraCylinders]] = OrderedDict()
+        self._ticks: OrderedDict[int, dict[str, Cylinders]] = OrderedDict()
 
     def put_frame(self, header: FrameHeader, image: np.ndarray) -> None:
         """Keep ``image`` (bgr8 HxWx3, gray8 HxW, or the 1-D bytes of a JPEG) as the camera's latest."""
@@ -98,12 +99,15 @@ class CalibrationInputs:
 
     def put_cylinders(self, message: CameraCylinders) -> None:
         slot = message.capture_ns - message.capture_ns % self.period_ns
+        # Kept as arrays, not messages: two minutes of a large site's cylinders as pydantic
+        # objects take hundreds of MiB. The camera index is set when a check reads them.
+        cylinders = message.to_cylinders(camera_index=-1)
         with self._lock:
-            self._ticks.setdefault(slot, {})[message.camera] = message
+            self._ticks.setdefault(slot, {})[message.camera] = cylinders
             while len(self._ticks) > self.max_ticks:
                 self._ticks.popitem(last=False)
 
-    def ticks(self) -> list[dict[str, CameraCylinders]]:
+    def ticks(self) -> list[dict[str, Cylinders]]:
         with self._lock:
             return [dict(t) for t in self._ticks.values()]
 
@@ -362,7 +366,7 @@ def consistency(
 ) -> ConsistencyReport:
     index = {c: i for i, c in enumerate(site.camera_ids)}
     frames = [
-        {index[c]: m.to_cylinders(index[c]) for c, m in tick.items() if c in index}
+        {index[c]: cylinders.with_camera(index[c]) for c, cylinders in tick.items() if c in index}
         for tick in inputs.ticks()
     ]
     cameras = [site.camera(c) for c in site.camera_ids]

@@ -83,6 +83,20 @@ def test_track_is_reported_after_activate_hits_detections(activate_hits: int) ->
     assert tracker.tracks().id.tolist() == [1]
 
 
+@pytest.mark.parametrize(
+    ("confirm_multi_view", "camera", "expected"),
+    [
+        (False, -1, [0, 0, 1, 1]),  # the paper's rule: three hits, however many cameras
+        (True, -1, [1, 1, 1, 1]),  # fused from several cameras: confirmed at once
+        (True, 2, [0, 0, 1, 1]),  # one camera alone still needs three hits
+    ],
+)
+def test_multi_view_detections_may_confirm_a_track_at_once(confirm_multi_view: bool, camera: int, expected: list[int]) -> None:
+    tracker = Tracker(TrackerConfig(confirm_multi_view=confirm_multi_view))
+    counts = [len(tracker.update(Cylinders(xy=[[0.1 * k, 0.0]], camera=[camera]), 0.5 * k)) for k in range(4)]
+    assert counts == expected
+
+
 @pytest.mark.parametrize(("max_misses", "report_max_misses"), [(5, 1), (3, 0), (1, 0), (5, 4)])
 def test_track_is_retired_after_max_misses(max_misses: int, report_max_misses: int) -> None:
     tracker = Tracker(TrackerConfig(max_misses=max_misses, report_max_misses=report_max_misses))

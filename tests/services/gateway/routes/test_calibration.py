@@ -244,8 +244,8 @@ def test_consistency_from_the_projectors_cylinders(client: TestClient) -> None:
 def test_calibration_inputs_keep_only_the_latest_ticks() -> None:
     inputs = CalibrationInputs(period_ns=100, max_ticks=3)
     for k in range(5):
-        inputs.put_cylinders(CameraCylinders(camera="gate", seq=k, capture_ns=100 * k + 10))
-    assert [t["gate"].seq for t in inputs.ticks()] == [2, 3, 4]
+        inputs.put_cylinders(CameraCylinders.from_cylinders("gate", k, 100 * k + 10, Cylinders(xy=[[float(k), 0.0]])))
+    assert [t["gate"].xy[0, 0] for t in inputs.ticks()] == [2.0, 3.0, 4.0]
 
 
 def test_drift_per_camera_follows_the_trackers_alerts(client: TestClient, state: GatewayState) -> None:
