@@ -58,7 +58,7 @@ FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 Frame = tuple[IntArray, FloatArray]
 
-WILDTRACK_TRACKER = TrackerConfig(activate_hits=2, process_noise=0.1)
+WILDTRACK_TRACKER = TrackerConfig(activate_hits=2, process_noise=0.1, confirm_multi_view=True)
 """The tracker settings for 2 annotated frames per second (see the module docstring)."""
 
 TRACKING_KEYS = ("MOTA", "MOTP", "IDF1", "IDP", "IDR", "IDSW", "MT", "PT", "ML", "FRAG", "FRAG_ratio")
