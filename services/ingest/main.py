@@ -23,12 +23,15 @@ from __future__ import annotations
 import argparse
 import logging
 import time
+from collections.abc import Iterator
 
 from bevflow.schemas import Detections2D, FrameHeader, SimulatedTruth
 from bevflow.sim.feed import LIVE_NOISE, SimulatedFeed, scene_for_site
 from bevflow.sim.noise import DetectorNoise
 from bevflow.sim.render_feed import RenderedCameras
 from bevflow.sim.render_textures import Appearance
+from bevflow.sim.scene import SceneFrame
+from bevflow.sim.views import GroundTruth
 from bevflow.site import Site
 
 from bevflow_services import bus
@@ -93,27 +96,14 @@ def simulate(session, keys: bus.Keys, site: Site, cameras: list[str], noise: Det
     codec = bus.JsonCodec(Detections2D)
     publications = {c: bus.Publication(session, keys.detections(c), codec) for c in cameras}
     truth_out = bus.Publication(session, keys.truth, bus.JsonCodec(SimulatedTruth))
-    period_ns = int(1e9 / feed.fps)
-    start_ns = time.time_ns()
-    skipped = 0
     print(f"bevflow ingest: simulating {len(cameras)} cameras of {site.site!r} at {feed.fps:g} fps", flush=True)
-    for scene_frame, truth in feed.scene_frames():
-        due_ns = start_ns + scene_frame.index * period_ns
-        if stop.wait(max(0.0, (due_ns - time.time_ns()) / 1e9)):
-            break
-        if time.time_ns() - due_ns > period_ns:  # fell behind: drop this frame at the source
-            skipped += 1
-            if skipped % 100 == 1:
-                log.warning("simulation behind real time; %d frames skipped so far", skipped)
-            continue
+    for scene_frame, truth in in_real_time(feed, stop, "simulation"):
         frame = feed.observe(scene_frame, truth)
         capture_ns = time.time_ns()
         for camera in cameras:
             boxes = frame.detections[site.camera_index(camera)]
             publications[camera].put(Detections2D.from_boxes(camera, frame.index, capture_ns, boxes))
-        truth_out.put(SimulatedTruth(
-            site=site.site, frame=frame.index, capture_ns=capture_ns, tracks=truth.track_ids.tolist(),
-            positions=[(float(x), float(y)) for x, y in truth.feet_xy]))
+        truth_out.put(simulated_truth(site, frame.index, capture_ns, truth))
     for publication in [*publications.values(), truth_out]:
         publication.close()
 
@@ -127,24 +117,11 @@ def simulate_frames(session, keys: bus.Keys, site: Site, cameras: list[str], arg
     publications = {c: bus.Publication(session, keys.frame(c), bus.FRAMES) for c in cameras}
     truth_out = bus.Publication(session, keys.truth, bus.JsonCodec(SimulatedTruth))
     sizes = {c: renderers.frame_size(c) for c in cameras}
-    period_ns = int(1e9 / feed.fps)
     every = camera_frame_stride(feed.fps, args.camera_fps)
-    start_ns = time.time_ns()
-    skipped = 0
     shown = ", ".join(f"{c} {w}x{h}" for c, (w, h) in sizes.items())
     print(f"bevflow ingest: rendering {len(cameras)} cameras of {site.site!r} at {feed.fps / every:g} fps ({shown})",
           flush=True)
-    for scene_frame, truth in feed.scene_frames():
-        if scene_frame.index % every:  # the crowd moves on between the frames the cameras take
-            continue
-        due_ns = start_ns + scene_frame.index * period_ns
-        if stop.wait(max(0.0, (due_ns - time.time_ns()) / 1e9)):
-            break
-        if time.time_ns() - due_ns > period_ns:  # fell behind: drop this frame at the source
-            skipped += 1
-            if skipped % 100 == 1:
-                log.warning("rendering behind real time; %d frames skipped so far", skipped)
-            continue
+    for scene_frame, truth in in_real_time(feed, stop, "rendering", every):
         # The capture time is when the scene looked like this; rendering is the camera's readout.
         capture_ns = time.time_ns()
         bodies = scene_frame.primitives()
@@ -156,11 +133,34 @@ def simulate_frames(session, keys: bus.Keys, site: Site, cameras: list[str], arg
             w, h = sizes[camera]
             header = FrameHeader(camera=camera, seq=scene_frame.index // every, capture_ns=capture_ns, width=w, height=h)
             publications[camera].put(bus.Frame(header, image))
-        truth_out.put(SimulatedTruth(
-            site=site.site, frame=scene_frame.index // every, capture_ns=capture_ns, tracks=truth.track_ids.tolist(),
-            positions=[(float(x), float(y)) for x, y in truth.feet_xy]))
+        truth_out.put(simulated_truth(site, scene_frame.index // every, capture_ns, truth))
     for publication in [*publications.values(), truth_out]:
         publication.close()
+
+
+def in_real_time(feed: SimulatedFeed, stop, what: str, every: int = 1) -> Iterator[tuple[SceneFrame, GroundTruth]]:
+    """Every ``every``-th scene frame of ``feed`` and its truth, each when its time comes; a frame
+    whose time has passed by a whole period is skipped (dropped at the source, never queued)."""
+    period_ns = int(1e9 / feed.fps)
+    start_ns = time.time_ns()
+    skipped = 0
+    for scene_frame, truth in feed.scene_frames():
+        if scene_frame.index % every:  # the crowd moves on between the frames the cameras take
+            continue
+        due_ns = start_ns + scene_frame.index * period_ns
+        if stop.wait(max(0.0, (due_ns - time.time_ns()) / 1e9)):
+            return
+        if time.time_ns() - due_ns > period_ns:
+            skipped += 1
+            if skipped % 100 == 1:
+                log.warning("%s behind real time; %d frames skipped so far", what, skipped)
+            continue
+        yield scene_frame, truth
+
+
+def simulated_truth(site: Site, frame: int, capture_ns: int, truth: GroundTruth) -> SimulatedTruth:
+    return SimulatedTruth(site=site.site, frame=frame, capture_ns=capture_ns, tracks=truth.track_ids.tolist(),
+                          positions=[(float(x), float(y)) for x, y in truth.feet_xy])
 
 
 def camera_frame_stride(scene_fps: float, camera_fps: float | None) -> int:

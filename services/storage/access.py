@@ -15,9 +15,8 @@ import hashlib
 from dataclasses import dataclass
 from typing import Any
 
-from bevflow_services.storage.backend import Backend, open_backend
+from bevflow_services.storage.database import Database
 from bevflow_services.storage.records import StorageError
-from bevflow_services.storage.schema import migrate
 from bevflow_services.storage.store import INT64_MAX, INT64_MIN, int64
 
 ROLES = ("viewer", "operator", "admin")  # each can do what the ones before it can
@@ -77,36 +76,8 @@ def check_role(role: str) -> str:
     return role
 
 
-class AccessStore:
+class AccessStore(Database):
     """Users, sessions, tokens and audit rows behind a ``Backend``; safe to share between threads."""
-
-    def __init__(self, backend: Backend) -> None:
-        self.backend = backend
-
-    @classmethod
-    def open(cls, url: str) -> AccessStore:
-        """Open (creating or migrating the tables) the database ``url`` names, as
-        ``HistoryDatabase.open`` does; ``StorageError`` says what is wrong."""
-        backend = open_backend(url)
-        try:
-            migrate(backend)
-        except Exception:
-            backend.close()
-            raise
-        return cls(backend)
-
-    @property
-    def url(self) -> str:
-        return self.backend.url
-
-    def close(self) -> None:
-        self.backend.close()
-
-    def __enter__(self) -> AccessStore:
-        return self
-
-    def __exit__(self, *_exc: object) -> None:
-        self.close()
 
     # --- users ---------------------------------------------------------------------------------
     def add_user(self, name: str, role: str, password_hash: str, now_ns: int) -> User:

@@ -17,7 +17,8 @@ import numpy as np
 
 from bevflow.schemas import Event, decode_event
 
-from bevflow_services.storage.backend import Backend, Transaction, open_backend
+from bevflow_services.storage.backend import Transaction
+from bevflow_services.storage.database import Database
 from bevflow_services.storage.batch import Batch
 from bevflow_services.storage.records import (
     SITE,
@@ -30,7 +31,6 @@ from bevflow_services.storage.records import (
     ZoneVisit,
 )
 from bevflow_services.storage.retention import apply_retention
-from bevflow_services.storage.schema import migrate
 
 KEEP_HIGHER = "CASE WHEN excluded.{c} > {t}.{c} THEN excluded.{c} ELSE {t}.{c} END"
 KEEP_LOWER = "CASE WHEN excluded.{c} < {t}.{c} THEN excluded.{c} ELSE {t}.{c} END"
@@ -81,40 +81,12 @@ def _where(conditions: Sequence[str]) -> str:
     return " WHERE " + " AND ".join(conditions) if conditions else ""
 
 
-class HistoryDatabase:
+class HistoryDatabase(Database):
     """One site's history (tables in ``bevflow_services.storage.schema``), behind a ``Backend``.
 
     Safe to share between threads. Several processes may open the same database: the recorder
     writes, the gateway reads and records acknowledgements.
     """
-
-    def __init__(self, backend: Backend) -> None:
-        self.backend = backend
-
-    @classmethod
-    def open(cls, url: str) -> HistoryDatabase:
-        """Open (creating or migrating its tables) the database ``url`` names: a SQLite file path,
-        ``sqlite:///PATH`` or a ``postgresql://`` URL. ``StorageError`` says what is wrong."""
-        backend = open_backend(url)
-        try:
-            migrate(backend)
-        except Exception:
-            backend.close()
-            raise
-        return cls(backend)
-
-    @property
-    def url(self) -> str:
-        return self.backend.url
-
-    def close(self) -> None:
-        self.backend.close()
-
-    def __enter__(self) -> HistoryDatabase:
-        return self
-
-    def __exit__(self, *_exc: object) -> None:
-        self.close()
 
     # --- writing -------------------------------------------------------------------------------
     def write(self, batch: Batch, recorded_ns: int | None = None) -> None:
