@@ -150,6 +150,8 @@ class RestPoller:
                 body = get_json(f"{self.url}/api/occupancy", timeout=1.0)
             except (OSError, ValueError):
                 continue
+            if body.get("time_ns") is None:  # a restarted gateway that has no occupancy yet
+                continue
             self.samples.append((time.time_ns(), int(body["time_ns"]), int(body["total"])))
 
     def close(self) -> None:
