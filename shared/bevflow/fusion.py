@@ -152,7 +152,7 @@ def fuse_cylinders(
     person = rank[inverse]
     assignment[keep[real]] = person
     weight = np.where(strong[real], 1.0, 0.0)[:, None, None] * info[real]
-    fused, n_views = _merge(rows[real], person, len(order), weight)
+    fused, n_views = _merge(rows[real], person, len(order), weight, with_covariance=noise is not None)
     return Fusion(fused=fused, assignment=assignment, n_views=n_views)
 
 
@@ -344,9 +344,13 @@ def _split_greedily(labels: IntArray, camera: IntArray, pairs: IntArray, depth: 
     labels[nodes] = [label_of[group[node]] for node in nodes.tolist()]
 
 
-def _merge(rows: Cylinders, person: IntArray, n_people: int, info: FloatArray) -> tuple[Cylinders, IntArray]:
+def _merge(
+    rows: Cylinders, person: IntArray, n_people: int, info: FloatArray, with_covariance: bool
+) -> tuple[Cylinders, IntArray]:
     """One row per person: feet by information-weighted mean (``info``: (N, 2, 2) per row, zero for
-    rows that must not move it), height and radius weighted by √det(info)."""
+    rows that must not move it), height and radius weighted by √det(info). ``with_covariance``:
+    the fused feet carry their covariance, the inverse of the summed information (``info`` is
+    then the rows' inverse covariances, not the paper rule's stand-in weights)."""
     n_views = np.bincount(person, minlength=n_people).astype(np.int64)
 
     def total(values: FloatArray) -> FloatArray:
@@ -377,5 +381,6 @@ def _merge(rows: Cylinders, person: IntArray, n_people: int, info: FloatArray) -
         camera=camera,
         score=score,
         occluded=~visible,
+        covariance=_inverse_2x2(total_info) if with_covariance else None,
     )
     return fused, n_views

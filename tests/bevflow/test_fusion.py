@@ -247,6 +247,18 @@ def test_default_weights_are_the_inverse_covariances():
     assert fused.score[0] == pytest.approx(0.9)  # the best view's
 
 
+def test_fused_people_carry_the_covariance_of_their_information_weighted_feet():
+    cylinders = Cylinders(xy=[[0.0, 10.3], [-0.2, 10.1], [5.0, 5.0]], camera=[0, 1, 0])
+    cov = position_covariance(cylinders, CROSSED)
+    fusion = fuse_cylinders(cylinders, CROSSED)
+    assert fusion.n_views.tolist() == [2, 1]
+    np.testing.assert_allclose(fusion.fused.covariance[0], np.linalg.inv(np.linalg.inv(cov[:2]).sum(axis=0)))
+    np.testing.assert_allclose(fusion.fused.covariance[1], cov[2])
+    # two crossed side views pin the feet down better than either alone, in every direction
+    assert np.all(np.linalg.eigvalsh(cov[:2] - fusion.fused.covariance[0]) > 0)
+    assert fuse_cylinders(cylinders, CROSSED, **PAPER).fused.covariance is None
+
+
 @pytest.mark.parametrize("occluded, expected", [([True, True], True), ([True, False], False), ([False, False], False)])
 def test_a_person_is_occluded_only_if_every_view_was(occluded, expected):
     fusion = fuse_cylinders(Cylinders(xy=[[2.0, 0.0], [2.1, 0.0]], camera=[0, 1], occluded=occluded), TWO)

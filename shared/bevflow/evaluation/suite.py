@@ -11,8 +11,8 @@ nearest-point), the whole pipeline runs as it runs live:
    surface visible get none (misses). Both grow with the preset's occlusion level, which sets the
    number of occluders and how close people walk (``bevflow.sim.presets``). No extra random miss
    rate is added on top: it would count the same occlusions twice. A camera reports the people
-   inside its monitored radius (the simulator's rule; ``simulate(detection_margin_m=...)`` lets
-   it see beyond).
+   inside its ``reporting_radius_m`` (the monitored radius plus 0.5 m), as the live projector
+   keeps them: a person walking in is tracked before they cross the circle.
 2. **Detect**: the detector-noise model (``bevflow.sim.noise``) jitters, drops and adds boxes,
    with the generator ``view_rng(seed, frame, camera)`` where ``camera`` is the camera's index in
    the preset, so a camera gets the same noisy boxes alone and in a pair, and every method sees
@@ -41,9 +41,15 @@ What is scored, and why:
   share of the ground truth that no camera of the set boxed (too hidden for a box: a ceiling on
   recall).
 - Hypotheses: the tracks ``SiteStep.table`` reports (confirmed tracks, matched this frame or
-  coasting one frame), restricted to the same monitored area. Nobody outside the area is
-  annotated, so an estimate there is neither right nor wrong (the rule of WILDTRACK's area too);
-  the tracker itself sees every detection, wherever it lands.
+  coasting one frame), scored as annotated data is scored where the annotation stops at an edge
+  (``scored_tracks``). Nobody outside the area is annotated, so an estimate of someone there is
+  neither right nor wrong: each frame's estimates are matched one-to-one (within 0.5 m) with
+  everyone the cameras see, inside the area or in the band just outside it; an estimate matched
+  to someone outside is left out, one matched to someone inside is scored wherever it lies, and
+  one matched to nobody is scored when it lies inside the area. So a person 0.1 m outside the
+  edge placed 0.1 m inside it is no false positive, and a person 0.1 m inside placed 0.1 m
+  outside is found (WILDTRACK's area is scored by the same rule). The tracker itself sees every
+  detection, wherever it lands.
 - MT, PT and ML are fractions of the ground-truth tracks, as in the paper's Table 2.
 - ``APE`` is the tracking one: the mean distance of the matched pairs, so it can never exceed the
   0.5 m threshold. ``box_APE`` is the projection alone: the mean floor distance between each
@@ -72,6 +78,7 @@ from bevflow.cylinder import METHODS, fit_cylinders
 from bevflow.detections import Boxes, Cylinders
 from bevflow.evaluation.rendered import RenderedDetector, attribute
 from bevflow.live.site_tracker import SiteTracker
+from bevflow.metrics.matching import match_positions
 from bevflow.metrics.tracking import TrackingScores, score_tracking
 from bevflow.schemas import CameraCylinders
 from bevflow.sim.noise import DetectorNoise, apply_detector_noise, view_rng
@@ -190,14 +197,13 @@ def camera_sets(preset: Preset) -> list[tuple[str, ...]]:
     return [ids] + ([(c,) for c in ids] if len(ids) > 1 else [])
 
 
-def simulate(preset: Preset, detection_margin_m: float = 0.0, detector: bool = False) -> SimulatedSequence:
+def simulate(preset: Preset, detector: bool = False) -> SimulatedSequence:
     """Run the preset's scene and compute every camera's view of every frame (the slow part).
-    A camera reports the people inside its monitored radius (the simulator's rule), or up to
-    ``detection_margin_m`` beyond it. ``detector``: also render every camera's frames and run the
-    shipped detector on them (``bevflow.evaluation.rendered``; much slower)."""
+    A camera reports the people inside its ``reporting_radius_m``, as the live projector keeps
+    them. ``detector``: also render every camera's frames and run the shipped detector on them
+    (``bevflow.evaluation.rendered``; much slower)."""
     site = preset.site
-    radii = [None if c.monitored_radius_m is None else c.monitored_radius_m + detection_margin_m for c in site.cameras]
-    rig = CameraRig([site.camera(c.id) for c in site.cameras], radii, preset.obstacles())
+    rig = CameraRig([site.camera(c.id) for c in site.cameras], [c.reporting_radius_m for c in site.cameras], preset.obstacles())
     rendered = RenderedDetector(site, preset.scene) if detector else None
     times, ids, feet, views, detected = [], [], [], [], []
     for frame in Scene(preset.scene).run():
@@ -335,7 +341,8 @@ def evaluate_sequence(
         hidden = hidden_share(sequence, rig, indices)
         for method in methods:
             found = detections[method]
-            hyp = [_inside(rig, ids, xy) for ids, xy in track(sequence, camera_ids, found.cylinders)]
+            tracked = track(sequence, camera_ids, found.cylinders)
+            hyp = [scored_tracks(rig, *frame) for frame in zip(gt, tracked, _seen_outside(sequence, rig, indices), strict=True)]
             scores = score_tracking(gt, hyp, THRESHOLD_M)
             rows.append(SuiteRow(preset.sequence or 0, camera_ids, method, scores, _box_ape(found, rig, indices), unseen, hidden))
     return rows
@@ -404,9 +411,31 @@ def _box_ape(found: Detections, rig: CameraRig, camera_indices: Sequence[int]) -
     return float(error[keep].mean()) if keep.any() else math.nan
 
 
-def _inside(rig: CameraRig, ids: IntArray, xy: FloatArray) -> Frame:
-    keep = rig.monitored(xy).any(axis=1) if len(xy) else np.zeros(0, dtype=bool)
+def scored_tracks(rig: CameraRig, gt: Frame, hyp: Frame, outside_xy: FloatArray) -> Frame:
+    """The tracks of one frame that are scored against ``gt`` (the people inside ``rig``'s
+    area): matched one-to-one within ``THRESHOLD_M`` with the ground truth and ``outside_xy``
+    (people in sight just outside the area, not annotated), a track is kept when it matches a
+    person inside, dropped when it matches someone outside, and otherwise kept when it lies
+    inside the area (see the module docstring)."""
+    ids, xy = hyp
+    if not len(xy):
+        return ids, xy
+    keep = rig.monitored(xy).any(axis=1)
+    everyone = np.concatenate([gt[1].reshape(-1, 2), outside_xy.reshape(-1, 2)])
+    if len(everyone):
+        person, track, _ = match_positions(everyone, xy, THRESHOLD_M)
+        keep[track] = person < len(gt[1])
     return ids[keep], xy[keep]
+
+
+def _seen_outside(sequence: SimulatedSequence, rig: CameraRig, camera_indices: Sequence[int]) -> list[FloatArray]:
+    """Per frame, the feet of the people outside ``rig``'s area whom a camera of
+    ``camera_indices`` has in sight (the unannotated band past the monitored circles)."""
+    out = []
+    for ids, feet, views in zip(sequence.person_ids, sequence.feet_xy, sequence.views, strict=True):
+        outside = ~rig.monitored(feet).any(axis=1) if len(feet) else np.zeros(0, dtype=bool)
+        out.append(feet[outside & np.isin(ids, _in_sight(views, camera_indices))].reshape(-1, 2))
+    return out
 
 
 @dataclass(frozen=True)

@@ -91,16 +91,21 @@ class ConstantVelocityKalman:
         covariance: FloatArray,
         xy: FloatArray,
         measurement_std_m: float | FloatArray | None = None,
+        measurement_covariance: FloatArray | None = None,
     ) -> tuple[FloatArray, FloatArray]:
         """Correct each track with its measured feet position ``xy`` (N, 2).
 
-        ``measurement_std_m`` overrides the filter's own, as a scalar or one per track."""
-        std = self.measurement_std_m if measurement_std_m is None else measurement_std_m
-        r = np.broadcast_to(np.asarray(std, dtype=np.float64) ** 2, (len(state),))
+        ``measurement_std_m`` overrides the filter's own, as a scalar or one per track;
+        ``measurement_covariance`` (N, 2, 2), m², replaces both with each measurement's own."""
         innovation = np.asarray(xy, dtype=np.float64).reshape(-1, 2) - state[:, :2]
-        s = covariance[:, :2, :2].copy()
-        s[:, 0, 0] += r
-        s[:, 1, 1] += r
+        if measurement_covariance is not None:
+            s = covariance[:, :2, :2] + np.asarray(measurement_covariance, dtype=np.float64).reshape(-1, 2, 2)
+        else:
+            std = self.measurement_std_m if measurement_std_m is None else measurement_std_m
+            r = np.broadcast_to(np.asarray(std, dtype=np.float64) ** 2, (len(state),))
+            s = covariance[:, :2, :2].copy()
+            s[:, 0, 0] += r
+            s[:, 1, 1] += r
         gain = covariance[:, :, :2] @ _inverse_2x2(s)  # (N, 4, 2)
         state = state + np.einsum("nij,nj->ni", gain, innovation)
         # P - K H P, symmetrised so rounding never lets it drift from symmetric.

@@ -80,6 +80,13 @@ class TrackerConfig:
       (``Cylinders.camera == -1``) is confirmed at once: two views at one instant corroborate a
       person as well as a single view over ``activate_hits`` frames, and at 2 fps waiting costs a
       second of every new track. Off by default (the paper confirms every track the same way).
+    - ``measurement_from_covariance``: a detection that carries its feet covariance
+      (``Cylinders.covariance``; fusion gives every fused person one) updates the filter with it
+      rather than with ``measurement_std_m``, so a precise ceiling view (about 0.1 m) is
+      followed closely and a side view counts mostly across its line of sight. On the paper
+      suite it lowered the tracked position error (seq5 cam1 0.121 → 0.105 m, seq1 pair 0.104 →
+      0.089 m) at equal or better MOTA; on WILDTRACK it raised MOTA on both noise seeds
+      (0.847 → 0.851, 0.837 → 0.847) and moved IDF1 by −0.016 and +0.012.
     """
 
     gate_m: float = 1.5
@@ -95,6 +102,7 @@ class TrackerConfig:
     shape_smoothing: float = 0.3
     report_max_misses: int = 1
     confirm_multi_view: bool = False
+    measurement_from_covariance: bool = True
 
     def __post_init__(self) -> None:
         for name in ("gate_m", "weak_gate_m", "measurement_std_m", "initial_speed_std_mps"):
@@ -291,13 +299,23 @@ class Tracker:
         det = tracks.detection[hit]
         if len(det):
             tracks.state[hit], tracks.covariance[hit] = self._kalman.update(
-                tracks.state[hit], tracks.covariance[hit], cylinders.xy[det]
+                tracks.state[hit], tracks.covariance[hit], cylinders.xy[det],
+                measurement_covariance=self._measurement_covariance(cylinders, det),
             )
             tracks.height[hit] = smooth(tracks.height[hit], cylinders.height[det], weight)
             tracks.radius[hit] = smooth(tracks.radius[hit], cylinders.radius[det], weight)
         tracks.hits[hit] += 1
         tracks.misses[hit] = 0
         tracks.misses[~hit] += 1
+
+    def _measurement_covariance(self, cylinders: Cylinders, det: IntArray) -> FloatArray | None:
+        """Each detection's own feet covariance, where ``measurement_from_covariance`` asks for
+        it and fusion gave one; None: the filter's fixed ``measurement_std_m``."""
+        if not self.config.measurement_from_covariance or cylinders.covariance is None:
+            return None
+        covariance = cylinders.covariance[det]
+        fixed = self.config.measurement_std_m**2 * np.eye(2)
+        return np.where(np.isfinite(covariance).all(axis=(1, 2))[:, None, None], covariance, fixed)
 
     def _confirm(self) -> None:
         tracks = self._tracks

@@ -19,6 +19,7 @@ from bevflow.evaluation.suite import (
     hidden_share,
     paper_presets,
     run_suite,
+    scored_tracks,
     simulate,
     track,
     unseen_share,
@@ -27,6 +28,7 @@ from bevflow.evaluation.tables import format_suite, format_table2, format_table3
 from bevflow.metrics.tracking import score_tracking
 from bevflow.sim.noise import DetectorNoise
 from bevflow.sim.presets import table1_sequence
+from bevflow.site import MONITORED_EDGE_MARGIN_M
 from bevflow.sim.views import CameraRig, CameraView
 
 PAPER_KEYS = {"seq", "cameras", "method", "MOTA", "MT", "PT", "ML", "FRAG", "FRAG_ratio", "P", "R", "F1", "APE", "IDF1"}
@@ -136,6 +138,37 @@ def test_the_simulator_reports_people_too_hidden_for_a_box_as_in_sight() -> None
         for v in views:
             assert set(v.person_ids.tolist()) <= set(v.in_sight_ids.tolist())
     assert in_sight > boxed  # seq5 (occlusion 5) has people glimpsed but under a quarter visible
+
+
+def test_cameras_report_people_up_to_their_reporting_radius_as_the_projector_keeps_them() -> None:
+    (preset,) = paper_presets(0.1, [1])
+    seq = simulate(preset)
+    centres = [preset.site.camera(c).center[:2] for c in preset.site.camera_ids]
+    reach = [float(np.linalg.norm(v.feet_xy - centres[v.camera_index], axis=1).max()) for views in seq.views for v in views if len(v)]
+    radius = preset.site.cameras[0].monitored_radius_m
+    assert radius < max(reach) <= radius + MONITORED_EDGE_MARGIN_M
+
+
+# seq6's circle: centre (8, 8), radius 8 m, so x = 0 is its left edge
+@pytest.mark.parametrize(
+    ("track_x", "inside_x", "outside_x", "scored"),
+    [
+        (4.0, [], [], True),  # inside, nobody there: a false positive
+        (0.1, [], [-0.1], False),  # inside, of someone just outside the edge: not annotated
+        (-0.1, [0.1], [], True),  # outside, of someone just inside: found
+        (-0.3, [], [], False),  # outside, nobody there: nobody annotated it
+        (-0.3, [], [-0.2], False),
+        (0.05, [0.3], [-0.1], False),  # of the nearer person, who stands outside
+        (0.05, [0.1], [-0.3], True),
+    ],
+)
+def test_tracks_are_scored_inside_the_area_and_where_they_match_someone_inside(
+    track_x: float, inside_x: list[float], outside_x: list[float], scored: bool
+) -> None:
+    gt = (np.arange(len(inside_x)), np.array([[x, 8.0] for x in inside_x]).reshape(-1, 2))
+    hyp = (np.array([7]), np.array([[track_x, 8.0]]))
+    ids, xy = scored_tracks(seq6_rig(), gt, hyp, np.array([[x, 8.0] for x in outside_x]).reshape(-1, 2))
+    assert ids.tolist() == ([7] if scored else []) and len(xy) == len(ids)
 
 
 def test_perfect_detections_of_one_walker_miss_only_the_frames_before_the_track_is_confirmed() -> None:

@@ -72,6 +72,18 @@ def test_update_takes_a_measurement_std_per_track() -> None:
     np.testing.assert_allclose(x[:, 0], [0.5, 0.1])  # gains 1/(1+1) and 1/(1+9)
 
 
+def test_update_takes_a_full_measurement_covariance_per_track() -> None:
+    # R = diag(1, 9) against P = I: gains 1/2 on X and 1/10 on Y; a diagonal R equals the std path
+    kf = ConstantVelocityKalman(measurement_std_m=100.0)
+    prior = np.concatenate([_axis_cov(1, 0, 1)] * 2)
+    r = np.array([np.diag([1.0, 9.0]), np.eye(2)])
+    x, p = kf.update(np.zeros((2, 4)), prior, np.ones((2, 2)), measurement_covariance=r)
+    np.testing.assert_allclose(x[:, :2], [[0.5, 0.1], [0.5, 0.5]])
+    np.testing.assert_allclose(p[:, [0, 1], [0, 1]], [[0.5, 0.9], [0.5, 0.5]])
+    same, _ = kf.update(np.zeros((1, 4)), prior[:1], np.ones((1, 2)), np.array([1.0]))
+    np.testing.assert_allclose(x[1], same[0])
+
+
 def test_one_long_step_equals_two_half_steps() -> None:
     kf = ConstantVelocityKalman(process_noise=0.7)
     x0, p0 = np.array([[1.0, -2.0, 0.3, 0.9]]), _axis_cov(0.4, 0.1, 0.8)

@@ -97,6 +97,23 @@ def test_multi_view_detections_may_confirm_a_track_at_once(confirm_multi_view: b
     assert counts == expected
 
 
+@pytest.mark.parametrize(
+    ("measured", "variance_m2", "follows"),
+    [
+        (True, 0.01, True),  # a precise detection (σ 0.1 m) is followed closely
+        (True, 1.0, False),  # an imprecise one (σ 1 m) hardly moves the track
+        (False, 0.01, False),  # off: every detection gets the fixed measurement_std_m (0.2 m)
+        (True, np.nan, False),  # unknown: the fixed one too
+    ],
+)
+def test_each_detection_may_update_with_its_own_covariance(measured: bool, variance_m2: float, follows: bool) -> None:
+    tracker = Tracker(TrackerConfig(activate_hits=1, measurement_from_covariance=measured))
+    tracker.update(Cylinders(xy=[[0.0, 0.0]]), 0.0)
+    jumped = tracker.update(Cylinders(xy=[[0.5, 0.0]], covariance=[np.eye(2) * variance_m2]), 0.1)
+    moved = float(jumped.xy[0, 0])
+    assert (moved > 0.4) == follows and 0.0 < moved < 0.5
+
+
 @pytest.mark.parametrize(("max_misses", "report_max_misses"), [(5, 1), (3, 0), (1, 0), (5, 4)])
 def test_track_is_retired_after_max_misses(max_misses: int, report_max_misses: int) -> None:
     tracker = Tracker(TrackerConfig(max_misses=max_misses, report_max_misses=report_max_misses))
