@@ -528,6 +528,13 @@ class Publication(Generic[M]):
         payload, attachment, encoding = self._codec.encode(message)
         self._publisher.put(payload, attachment=attachment, encoding=encoding)
 
+    def put_json(self, payload: bytes) -> None:
+        """Publish a message that its maker already wrote as JSON (``schemas.Tracks.wire_json``);
+        only for a ``JsonCodec`` publication, whose encoding it carries."""
+        if not isinstance(self._codec, JsonCodec):
+            raise TypeError(f"put_json needs a JsonCodec publication, not {type(self._codec).__name__}")
+        self._publisher.put(payload, encoding=self._codec.encoding)
+
     def has_subscribers(self) -> bool:
         return self._publisher.matching_status.matching
 

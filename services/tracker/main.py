@@ -164,7 +164,7 @@ def main(args: argparse.Namespace) -> int:
                         continue
                     if reservation:
                         reserve_ids(reservation, tracker.tracker.next_id)
-                    tracks_out.put(output.tracks)
+                    tracks_out.put_json(output.tracks_json)
                     occupancy_out.put(output.occupancy)
                     for event in output.events:
                         events_out.put(event)

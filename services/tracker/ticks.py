@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
+from functools import cached_property
 
 from bevflow.calibration.drift import DriftConfig, DriftMonitor
 from bevflow.detections import Cylinders
@@ -27,11 +28,16 @@ log = logging.getLogger(__name__)
 
 @dataclass(frozen=True, eq=False)
 class TickOutput:
-    """The messages one tick produced, in publishing order (tracks, occupancy, then events)."""
+    """The messages one tick produced, in publishing order (tracks, occupancy, then events). The
+    tracks come as their wire JSON (``SiteStep.tracks_json``); ``tracks`` reads it back."""
 
-    tracks: Tracks
+    tracks_json: bytes
     occupancy: Occupancy
     events: list[Event] = field(default_factory=list)
+
+    @cached_property
+    def tracks(self) -> Tracks:
+        return Tracks.model_validate_json(self.tracks_json)
 
 
 class TickHandler:
@@ -56,7 +62,7 @@ class TickHandler:
         step = self.tracker.step(tick.time_ns, per_camera)
         events: list[Event] = list(step.events)
         events += self._drift(tick.time_ns, per_camera)
-        return TickOutput(step.tracks, step.occupancy, events)
+        return TickOutput(step.tracks_json, step.occupancy, events)
 
     def _drift(self, time_ns: int, per_camera: dict[str, Cylinders]) -> list[CalibrationDrift]:
         if self.drift is None:

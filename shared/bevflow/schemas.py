@@ -11,7 +11,7 @@ nanoseconds since the Unix epoch (``*_ns``), pixel boxes as (x0, y0, x1, y1).
 from __future__ import annotations
 
 from datetime import datetime, timezone
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, Protocol
 
 import numpy as np
 from pydantic import (
@@ -23,6 +23,7 @@ from pydantic import (
     model_serializer,
     model_validator,
 )
+from pydantic_core import to_json
 
 from bevflow.detections import Boxes, Cylinders
 
@@ -190,6 +191,50 @@ class Tracks(Message):
     time_ns: Annotated[int, Field(ge=0)]
     tracks: list[TrackState] = Field(default_factory=list)
     violations: list[tuple[int, int]] = Field(default_factory=list, description="pairs closer than the limit now")
+
+    @staticmethod
+    def wire_json(
+        site: str,
+        time_ns: int,
+        columns: TrackColumns,
+        cameras: list[list[str]],
+        zones: list[list[str]],
+        violations: list[tuple[int, int]] | list[list[int]],
+    ) -> bytes:
+        """This message's JSON written straight from the tracker's columns (one row per person),
+        without a ``TrackState`` per person: validating a thousand of them took longer than
+        fusing and tracking the site. Subscribers validate what arrives as usual; here the columns
+        are checked in bulk for what the fields require, and a bad one raises (publishing a wrong
+        message is a bug). Metres and metres per second are rounded to 0.1 mm."""
+        n = len(columns.id)
+        if not (len(cameras) == len(zones) == n and columns.xy.shape == columns.velocity.shape == (n, 2)):
+            raise ValueError("every track column must have one row per track")
+        # 0.1 mm (and mm/s) is far below what any camera tells apart, and a third fewer bytes to
+        # send and for every subscriber to parse.
+        xy, velocity, height, radius = (np.round(c, 4) for c in (columns.xy, columns.velocity, columns.height, columns.radius))
+        finite = np.isfinite(xy).all() and np.isfinite(velocity).all()
+        if not (finite and time_ns >= 0 and (height > 0).all() and (radius > 0).all()):
+            raise ValueError("tracks need finite positions and velocities, heights and radii > 0, time_ns >= 0")
+        columns_out = (columns.id.tolist(), xy.tolist(), velocity.tolist(), height.tolist(), radius.tolist())
+        rows = zip(*columns_out, cameras, zones, strict=True)
+        states = [
+            {"id": i, "xy": p, "velocity": v, "height": h, "radius": r, "cameras": c, "zones": z}
+            for i, p, v, h, r, c, z in rows
+        ]
+        message = {"schema_version": SCHEMA_VERSION, "site": site, "time_ns": int(time_ns), "tracks": states,
+                   "violations": violations}  # fmt: skip
+        return to_json(message)
+
+
+class TrackColumns(Protocol):
+    """What ``Tracks.wire_json`` reads of a tracker's table: ``id`` (N,), ``xy`` and ``velocity``
+    (N, 2), ``height`` and ``radius`` (N,)."""
+
+    id: np.ndarray
+    xy: np.ndarray
+    velocity: np.ndarray
+    height: np.ndarray
+    radius: np.ndarray
 
 
 class ZoneOccupancy(BaseModel):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import inspect
 import json
 import typing
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -305,3 +306,50 @@ def test_event_union_matches_event_types() -> None:
     union = typing.get_args(typing.get_args(schemas.Event)[0])
     literals = {value for cls in union for value in typing.get_args(cls.model_fields["type"].annotation)}
     assert literals == set(EVENT_TYPES)
+
+
+def _columns(n: int, **changes: Any) -> SimpleNamespace:
+    rng = np.random.default_rng(n)
+    columns = {"id": np.arange(1, n + 1), "xy": rng.uniform(0, 40, (n, 2)), "velocity": rng.normal(0, 1, (n, 2)),
+               "height": rng.uniform(1.5, 1.9, n), "radius": rng.uniform(0.2, 0.4, n)}  # fmt: skip
+    return SimpleNamespace(**{**columns, **changes})
+
+
+@pytest.mark.parametrize(
+    ("n", "cameras", "zones", "violations"),
+    [
+        (0, [], [], []),
+        (1, [["cam1"]], [[]], []),
+        (3, [["cam1", "cam2"], [], ["cam2"]], [["gate"], ["gate", "hall"], []], [(1, 3)]),
+    ],
+)
+def test_tracks_wire_json_is_the_message_built_from_the_same_columns(n, cameras, zones, violations) -> None:
+    columns = _columns(n)
+    states = [
+        TrackState(id=int(columns.id[k]), xy=tuple(columns.xy[k]), velocity=tuple(columns.velocity[k]),
+                   height=float(columns.height[k]), radius=float(columns.radius[k]), cameras=cameras[k], zones=zones[k])
+        for k in range(n)
+    ]  # fmt: skip
+    got = Tracks.model_validate_json(Tracks.wire_json("hall", 7, columns, cameras, zones, violations))
+    exact = {"id", "cameras", "zones"}
+    assert got.model_dump(exclude={"tracks": {"__all__": set(TrackState.model_fields) - exact}}) == Tracks(
+        site="hall", time_ns=7, tracks=states, violations=violations
+    ).model_dump(exclude={"tracks": {"__all__": set(TrackState.model_fields) - exact}})
+    for field in ("xy", "velocity", "height", "radius"):  # to 0.1 mm
+        np.testing.assert_allclose([getattr(t, field) for t in got.tracks], [getattr(t, field) for t in states], atol=5e-5)
+
+
+@pytest.mark.parametrize(
+    ("changes", "time_ns", "rows"),
+    [
+        ({"xy": np.array([[np.nan, 1.0]])}, 0, 1),
+        ({"velocity": np.array([[np.inf, 0.0]])}, 0, 1),
+        ({"height": np.array([0.0])}, 0, 1),
+        ({"radius": np.array([-0.3])}, 0, 1),
+        ({}, -1, 1),
+        ({}, 0, 2),  # two camera and zone lists for one track
+    ],
+)
+def test_tracks_wire_json_refuses_columns_the_message_would_refuse(changes, time_ns, rows) -> None:
+    with pytest.raises(ValueError, match="track"):
+        Tracks.wire_json("hall", time_ns, _columns(1, **changes), [[]] * rows, [[]] * rows, [])

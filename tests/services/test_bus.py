@@ -299,6 +299,21 @@ def test_bad_payload_is_counted_and_the_stream_goes_on(keys, sessions, codec, go
                                     "handler_errors": 0}
 
 
+def test_a_message_written_as_json_by_its_maker_arrives_like_any_other(keys, sessions):
+    a, b = sessions
+    codec = bus.JsonCodec(schemas.Tracks)
+    received: queue.Queue = queue.Queue()
+    sub = bus.subscribe(b, keys.tracks, codec, received.put)
+    publication(a, keys.tracks, codec).put_json(GOOD_TRACKS.model_dump_json().encode())
+    assert received.get(timeout=TIMEOUT) == GOOD_TRACKS
+    assert sub.stats.snapshot()["decoded"] == 1
+
+
+def test_only_json_publications_take_json(keys, sessions):
+    with bus.Publication(sessions[0], keys.frame("cam1"), bus.FRAMES) as frames, pytest.raises(TypeError, match="JsonCodec"):
+        frames.put_json(b"{}")
+
+
 def test_publishing_the_wrong_type_is_a_bug():
     with pytest.raises(Exception, match="serializ"):
         EVENT.encode(GOOD_TRACKS)

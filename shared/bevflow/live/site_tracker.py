@@ -8,6 +8,7 @@ The evaluation suite calls the same step, so what is scored is what runs live.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import cached_property
 
 import numpy as np
 
@@ -21,14 +22,19 @@ from bevflow.tracking.tracker import Tracker, TrackerConfig, TrackTable
 
 @dataclass(frozen=True, eq=False)
 class SiteStep:
-    """What one tick produced."""
+    """What one tick produced. ``tracks_json`` is the ``Tracks`` message as it goes on the wire;
+    ``tracks`` reads it back, validated, for callers that want the objects."""
 
-    tracks: Tracks
+    tracks_json: bytes
     occupancy: Occupancy
     events: list[DistanceViolation | OverCapacity]
     fusion: Fusion
     table: TrackTable
     analytics: AnalyticsTick
+
+    @cached_property
+    def tracks(self) -> Tracks:
+        return Tracks.model_validate_json(self.tracks_json)
 
 
 class SiteTracker:
@@ -43,6 +49,7 @@ class SiteTracker:
         self.cameras = [site.camera(c) for c in self.camera_ids]
         self.tracker = Tracker(tracker_config or TrackerConfig.from_thresholds(site.thresholds), first_id=first_id)
         self.analytics = SiteAnalytics(site)
+        self._alone = [[c] for c in self.camera_ids]  # shared lists, read only: serialised as they are
 
     def step(self, time_ns: int, per_camera: dict[str, Cylinders]) -> SiteStep:
         """Advance to ``time_ns`` with each reporting camera's cylinders (cameras missing from
@@ -51,7 +58,9 @@ class SiteTracker:
         fusion = fuse_cylinders(seen, self.cameras, self.site.thresholds.fusion_distance_m)
         table = self.tracker.update(fusion.fused, time_ns / 1e9)
         tick = self.analytics.update(time_ns, table.id, table.xy, table.velocity)
-        tracks = self._tracks_message(time_ns, table, self._cameras_of_fused(fusion, seen.camera), tick)
+        seen_by = self._cameras_of_fused(fusion, seen.camera)
+        cameras = [seen_by[d] if d >= 0 else [] for d in table.detection.tolist()]
+        tracks = Tracks.wire_json(self.site.site, time_ns, table, cameras, tick.zones_by_row, tick.violations.tolist())
         events = [e.model_copy(update={"raised_ns": time_ns}) for e in tick.events]
         return SiteStep(tracks, tick.occupancy, events, fusion, table, tick)
 
@@ -62,32 +71,19 @@ class SiteTracker:
         seen = Cylinders.merge(parts)
         return replace(seen, camera=np.repeat(np.asarray(index, dtype=np.int64), [len(p) for p in parts]))
 
-    def _tracks_message(
-        self, time_ns: int, table: TrackTable, seen_by: list[list[str]], tick: AnalyticsTick
-    ) -> Tracks:
-        # One validation of plain lists for the whole message: a thousand tracks would otherwise
-        # cost a thousand ``TrackState(...)`` calls, the most expensive part of the tick.
-        cameras = [seen_by[d] if d >= 0 else [] for d in table.detection.tolist()]
-        columns = (
-            table.id.tolist(), table.xy.tolist(), table.velocity.tolist(), table.height.tolist(),
-            table.radius.tolist(), cameras, tick.zones_by_row,
-        )  # fmt: skip
-        states = [
-            {"id": i, "xy": xy, "velocity": v, "height": h, "radius": r, "cameras": c, "zones": z}
-            for i, xy, v, h, r, c, z in zip(*columns, strict=True)
-        ]
-        violations = tick.violations.tolist()
-        return Tracks.model_validate(
-            {"site": self.site.site, "time_ns": time_ns, "tracks": states, "violations": violations}
-        )
-
     def _cameras_of_fused(self, fusion: Fusion, input_cameras: np.ndarray) -> list[list[str]]:
         """For each fused person, the ids of the cameras whose cylinders were merged into it, in
         site camera order."""
-        out: list[list[str]] = [[] for _ in range(len(fusion.fused))]
-        merged = fusion.assignment >= 0  # not: off the floor, or a weak view that joined nobody
+        fused_camera = fusion.fused.camera.tolist()
+        # One camera's view alone (most people) names its camera; the rest are looked up.
+        out = [self._alone[c] if c >= 0 else [] for c in fused_camera]
+        merged = np.flatnonzero(fusion.assignment >= 0)  # not: off the floor, or a weak view alone
+        shared = merged[fusion.fused.camera[fusion.assignment[merged]] < 0]
         count = len(self.camera_ids)
-        person_camera = np.unique(fusion.assignment[merged] * count + input_cameras[merged])
-        for person, camera in zip((person_camera // count).tolist(), (person_camera % count).tolist()):
-            out[person].append(self.camera_ids[camera])
+        person_camera = np.unique(fusion.assignment[shared] * count + input_cameras[shared])
+        person = person_camera // count
+        names = [self.camera_ids[c] for c in (person_camera % count).tolist()]
+        starts = np.flatnonzero(np.diff(person, prepend=-1)).tolist()  # sorted: each person's run
+        for p, a, b in zip(person[starts].tolist(), starts, starts[1:] + [len(names)]):
+            out[p] = names[a:b]
         return out
