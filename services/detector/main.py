@@ -8,7 +8,9 @@ with the camera's model (``detector`` in the site file, or the model for its mou
 see ``bevflow_services.detector.models``) at the paper's height-adaptive scale, and publishes a
 ``Detections2D`` per frame with the frame's sequence number and capture time, in the pixels of
 the camera's calibrated image (a frame sent smaller than its calibration, e.g. already at the
-detector's scale, is mapped back).
+detector's scale, is mapped back). Only the window of the frame around the camera's reporting
+radius is searched (``bevflow.detect.window``; ``--whole-frame`` searches it all): the projector
+drops everyone outside it, and a demo-hall camera's window is 58 % of its frame.
 
 Latest frame wins: each camera keeps only its newest unprocessed frame; every pass takes each
 camera's newest frame and detects them in turn, so a detector slower than its cameras skips
@@ -30,6 +32,7 @@ import cv2
 import numpy as np
 
 from bevflow.detect.runtime import Detector, DetectorError
+from bevflow.detect.window import detection_window, scaled_window
 from bevflow.detections import Boxes
 from bevflow.schemas import Detections2D, FrameHeader
 from bevflow.site import Site
@@ -54,6 +57,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--threads", type=int, default=2, help="ONNX Runtime threads per inference (default 2)")
     group.add_argument("--score-threshold", type=float, default=0.4,
                        help="lowest confidence of a reported person, 0 to 1 (default 0.4)")
+    group.add_argument("--whole-frame", action="store_true",
+                       help="run the detector on the whole frame, not only the part that shows the camera's "
+                       "monitored radius (slower; finds people the projector then drops)")
 
 
 class BadFrame(Exception):
@@ -67,9 +73,13 @@ class BadFrame(Exception):
 class FrameDetector:
     """The service's work, apart from the bus: one frame in, that camera's boxes out."""
 
-    def __init__(self, site: Site, detectors: dict[str, Detector]) -> None:
+    def __init__(self, site: Site, detectors: dict[str, Detector], whole_frame: bool = False) -> None:
         self.site = site
         self.detectors = detectors
+        # Each camera's window around its reporting radius; the rest of the frame holds nobody
+        # the projector would keep (``bevflow.detect.window``).
+        self.windows = {c: None if whole_frame else detection_window(site.camera(c), site.cameras[site.camera_index(c)].reporting_radius_m)
+                        for c in detectors}  # fmt: skip
 
     def detect(self, header: FrameHeader, image: np.ndarray) -> Detections2D:
         """Boxes of the people in ``image`` (as its ``header`` describes it), in the camera's
@@ -84,10 +94,11 @@ class FrameDetector:
         if abs(sx / sy - 1.0) > ASPECT_TOLERANCE:
             raise BadFrame("frame_size", f"a {bgr.shape[1]}x{bgr.shape[0]} frame from {camera_id}, "
                            f"whose calibration is {width}x{height}")
-        boxes = self.detectors[camera_id].detect(bgr, float(camera.center[2]), float(camera.K[0, 0]) * sx)
-        # Frame pixels → calibrated pixels (pixel-centre coordinates: u = (u' + 0.5) / s − 0.5).
+        x0, y0, x1, y1 = scaled_window(self.windows[camera_id], sx, bgr.shape[1], bgr.shape[0])
+        boxes = self.detectors[camera_id].detect(bgr[y0:y1, x0:x1], float(camera.center[2]), float(camera.K[0, 0]) * sx)
+        # Window pixels → frame pixels → calibrated pixels (pixel centres: u = (u' + 0.5) / s − 0.5).
         scale = np.array([sx, sy, sx, sy])
-        xyxy = (boxes.xyxy + 0.5) / scale - 0.5
+        xyxy = (boxes.xyxy + [x0, y0, x0, y0] + 0.5) / scale - 0.5
         return Detections2D.from_boxes(camera_id, header.seq, header.capture_ns, Boxes(xyxy=xyxy, confidence=boxes.confidence))
 
 
@@ -132,7 +143,7 @@ def main(args: argparse.Namespace) -> int:
                               score_threshold=args.score_threshold)
     except (DetectorError, ValueError) as exc:
         raise UserError(str(exc)) from None
-    worker = FrameDetector(site, models.detectors)
+    worker = FrameDetector(site, models.detectors, whole_frame=args.whole_frame)
     keys = bus.Keys(site_id)
     stats = bus.BusStats()
     session = bus.open_session(bus.config_from_args(args))

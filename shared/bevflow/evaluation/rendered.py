@@ -24,6 +24,7 @@ from scipy.optimize import linear_sum_assignment
 
 from bevflow.detect.runtime import Detector
 from bevflow.detect.scaling import scale_factor
+from bevflow.detect.window import Window, detection_window, scaled_window
 from bevflow.detections import Boxes
 from bevflow.sim.render import FisheyeRenderer, Room
 from bevflow.sim.render_textures import Appearance, RenderStyle
@@ -37,24 +38,32 @@ MATCH_IOU = 0.3
 
 class RenderedDetector:
     """Renders each camera of ``site`` over the static scene of ``scene`` and runs ``detector``
-    (default: the shipped model, one thread) on the frames. ``boxes(frame)`` gives one ``Boxes``
-    per camera, in site order, in the calibrated cameras' pixels."""
+    (default: the shipped model, one thread) on the frames, within each camera's detection window
+    as the detector service does (``whole_frame``: on all of it). ``boxes(frame)`` gives one
+    ``Boxes`` per camera, in site order, in the calibrated cameras' pixels."""
 
-    def __init__(self, site: Site, scene: SceneConfig, detector: Detector | None = None, seed: int = 0) -> None:
+    def __init__(
+        self, site: Site, scene: SceneConfig, detector: Detector | None = None, seed: int = 0, whole_frame: bool = False
+    ) -> None:
         self.detector = detector if detector is not None else Detector(threads=1)
         self.seed = seed
         self.style = RenderStyle.plain()
         room = Room.from_scene(scene)
         self.renderers: list[FisheyeRenderer] = []
         self.factors: list[float] = []
-        for camera_id in site.camera_ids:
-            camera = site.camera(camera_id)
+        self.windows: list[Window] = []
+        for config in site.cameras:
+            camera = site.camera(config.id)
             w, _ = camera.image_size
             ideal = scale_factor(float(camera.center[2]), float(camera.K[0, 0]))
             # Scale by the rounded width's ratio, so boxes map back exactly (as a resized frame would).
             factor = max(int(round(w * ideal)), 1) / w
-            self.renderers.append(FisheyeRenderer(camera.scaled(factor), room))
+            scaled = camera.scaled(factor)
+            self.renderers.append(FisheyeRenderer(scaled, room))
             self.factors.append(factor)
+            # The detector service searches only this window of each frame.
+            window = None if whole_frame else detection_window(camera, config.reporting_radius_m)
+            self.windows.append(scaled_window(window, factor, *scaled.image_size))
         self._rng = np.random.default_rng(seed)
 
     def boxes(self, frame: SceneFrame) -> list[Boxes]:
@@ -62,11 +71,12 @@ class RenderedDetector:
         bodies = frame.primitives()
         appearance = Appearance.for_identities(frame.identity, self.seed)
         out = []
-        for renderer, factor in zip(self.renderers, self.factors, strict=True):
+        for renderer, factor, (x0, y0, x1, y1) in zip(self.renderers, self.factors, self.windows, strict=True):
             image = renderer.render(bodies, frame.person_ids, appearance, self.style, self._rng).image
-            found = self.detector.detect_scaled(image, 1.0)
-            # Detector-scale pixels → calibrated pixels (pixel-centre coordinates).
-            out.append(Boxes(xyxy=(found.xyxy + 0.5) / factor - 0.5, confidence=found.confidence))
+            found = self.detector.detect_scaled(image[y0:y1, x0:x1], 1.0)
+            # Window pixels → detector-scale pixels → calibrated pixels (pixel-centre coordinates).
+            xyxy = found.xyxy + [x0, y0, x0, y0]
+            out.append(Boxes(xyxy=(xyxy + 0.5) / factor - 0.5, confidence=found.confidence))
         return out
 
 

@@ -7,6 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
+from bevflow.detect.window import scaled_window
 from bevflow.detections import Boxes
 from bevflow.schemas import FrameHeader
 from bevflow.sim.bodies import BodyShape
@@ -52,6 +53,28 @@ def test_boxes_come_back_in_the_calibrated_pixels_whatever_the_frame_size(scale:
     assert message.confidence == [pytest.approx(0.8)]
     # The detector is told the frame's own focal length, so it scales it the right amount.
     assert fake.calls == [((h, w, 3), pytest.approx(4.0), pytest.approx(300 * scale))]
+
+
+WINDOWED = parse_site("""
+site: hall
+cameras:
+  - {id: a, image_size: [1000, 800], intrinsics: {fx: 300, fy: 300, cx: 499.5, cy: 399.5}, pose: {position: [0, 0, 4.0]},
+     monitored_radius_m: 3.0}
+""")
+
+
+@pytest.mark.parametrize(("scale", "whole_frame"), [(1.0, False), (0.5, False), (0.5, True)])
+def test_only_the_window_around_the_monitored_radius_is_searched(scale: float, whole_frame: bool) -> None:
+    fake = FakeDetector()
+    w, h = int(1000 * scale), int(800 * scale)
+    worker = FrameDetector(WINDOWED, {"a": fake}, whole_frame=whole_frame)
+    message = worker.detect(header(width=w, height=h), np.zeros((h, w, 3), np.uint8))
+    x0, y0, x1, y1 = scaled_window(None if whole_frame else worker.windows["a"], scale, w, h)
+    assert fake.calls == [((y1 - y0, x1 - x0, 3), pytest.approx(4.0), pytest.approx(300 * scale))]
+    assert whole_frame or (x1 - x0) * (y1 - y0) < 0.8 * w * h
+    # the box found in the window comes back in the calibrated pixels of the whole image
+    expected = (np.array([10.0, 20.0, 30.0, 60.0]) + [x0, y0, x0, y0] + 0.5) / scale - 0.5
+    np.testing.assert_allclose(message.boxes[0], expected)
 
 
 def test_jpeg_and_grey_frames_are_detected_in_colour() -> None:
