@@ -105,7 +105,7 @@ class ServiceGroup:
         self.stop()
 
 
-BOXES = ("rendered", "simulated")
+BOXES = ("rendered", "simulated", "recorded")
 TEMPORARY_DB = "temporary"
 # With the detector on a CPU, every camera's frame of one instant waits its turn in one detector,
 # so the last camera's cylinders reach the tracker about (cameras x time per frame) after capture:
@@ -122,14 +122,15 @@ def start_pipeline(group: ServiceGroup, port: int, *, boxes: str = "rendered", h
     ``boxes="rendered"``: the ingest renders every camera's frames and the detector service finds
     the people in them (ingest → detector → projector → tracker → gateway). ``"simulated"``: the
     ingest publishes the simulator's noisy boxes and no detector runs (the system without the
-    detector's cost). ``history_db``: a SQLite file (or database URL) the recorder writes and the
+    detector's cost). ``"recorded"``: the ingest reads each camera's ``source`` from the site file
+    (frames recorded before, or real cameras) and the detector finds the people. ``history_db``: a SQLite file (or database URL) the recorder writes and the
     gateway reads its history from; ``TEMPORARY_DB`` puts one in the group's log folder; None runs
     no recorder and the gateway keeps its history in memory. ``tracker_args`` default: a longer
     wait for late cameras (``DETECTOR_MAX_WAIT_MS``) with the detector, none without."""
     if boxes not in BOXES:
         raise ValueError(f"boxes must be one of {', '.join(BOXES)}, got {boxes!r}")
     if tracker_args is None:
-        tracker_args = ("--max-wait-ms", str(DETECTOR_MAX_WAIT_MS)) if boxes == "rendered" else ()
+        tracker_args = ("--max-wait-ms", str(DETECTOR_MAX_WAIT_MS)) if boxes != "simulated" else ()
     # The id file lets a tracker restarted by hand (or by the chaos test) continue past old ids.
     group.start("tracker", "--id-file", str(group.log_dir / "tracker-next-id"), *tracker_args)
     group.start("projector")
@@ -146,6 +147,9 @@ def start_pipeline(group: ServiceGroup, port: int, *, boxes: str = "rendered", h
     if boxes == "rendered":
         group.start("detector", *detector_args)
         group.start("ingest", "--simulate", "--render", *ingest_args)
+    elif boxes == "recorded":
+        group.start("detector", *detector_args)
+        group.start("ingest", *ingest_args)
     else:
         group.start("ingest", "--simulate", *ingest_args)
     return base

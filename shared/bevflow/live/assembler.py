@@ -3,8 +3,10 @@
 Cameras are not synchronised and their results reach the tracker late, out of order, or not at
 all. The tracker needs one set of cylinders per tick, in time order. ``TickAssembler`` puts each
 camera message into the tick slot of its capture time and releases a slot once every expected
-camera has reported for it, or once ``max_wait_ns`` has passed since the slot ended, whichever
-comes first. Only cameras heard from in the last ``stale_ns`` are waited for, so a dead camera
+camera has reported for it or for a later slot, or once ``max_wait_ns`` has passed since the slot
+ended, whichever comes first. A camera's results arrive in capture order, so one that has
+reported a later capture has nothing more for the slot: a frame its detector skipped (latest
+frame wins) costs no waiting. Only cameras heard from in the last ``stale_ns`` are waited for, so a dead camera
 delays the site by at most ``max_wait_ns`` for a few seconds, then not at all, and never stops it.
 
 What does not fit is dropped and counted, never raised: a message for a slot already released
@@ -66,6 +68,7 @@ class TickAssembler(Generic[T]):
         self.max_future_ns = max_future_ns
         self.stale_ns = stale_ns
         self._heard_ns: dict[str, int] = {}  # camera -> arrival time of its last accepted or late message
+        self._newest_ns: dict[str, int] = {}  # camera -> its latest capture time accepted
         self._slots: dict[int, Tick[T]] = {}
         self._released_until_ns: int | None = None  # every slot starting before this is gone
         self.counts: Counter[str] = Counter()
@@ -79,6 +82,7 @@ class TickAssembler(Generic[T]):
             self._heard_ns[camera] = now_ns
         if result != "accepted":
             return result
+        self._newest_ns[camera] = max(capture_ns, self._newest_ns.get(camera, capture_ns))
         start = capture_ns - capture_ns % self.period_ns
         slot = self._slots.setdefault(start, Tick(start, self.period_ns))
         if capture_ns >= slot.capture_ns.get(camera, -1):
@@ -103,7 +107,7 @@ class TickAssembler(Generic[T]):
         live = {c for c, heard in self._heard_ns.items() if now_ns - heard <= self.stale_ns}
         for start in sorted(self._slots):
             slot = self._slots[start]
-            complete = slot.items.keys() >= live
+            complete = all(c in slot.items or self._newest_ns.get(c, -1) >= slot.end_ns for c in live)
             expired = now_ns >= slot.end_ns + self.max_wait_ns
             if complete or expired:
                 ready_until = slot.end_ns

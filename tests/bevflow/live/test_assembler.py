@@ -66,6 +66,25 @@ def test_ticks_leave_in_time_order_even_when_a_newer_slot_completes_first() -> N
     assert ticks[0].items == {"a": "old-a"}
 
 
+@pytest.mark.parametrize(
+    ("b_capture_ms", "released"),
+    [
+        (1120, [1000]),  # b skipped slot 1000 and moved on: nothing more is coming for it
+        (1099, [1000]),  # b reported into slot 1000 itself
+        (990, []),  # b is behind: slot 1000 waits for it
+    ],
+)
+def test_a_camera_that_reported_a_later_capture_is_not_waited_for(b_capture_ms: int, released: list[int]) -> None:
+    a = make(cameras=("a", "b", "c"))
+    for camera in ("a", "b", "c"):
+        a.push(camera, 900 * MS, "hello", now_ns=950 * MS)
+    a.pop_ready(now_ns=950 * MS)  # slot 900 complete: every camera is live
+    a.push("a", 1010 * MS, "a1", now_ns=1020 * MS)
+    a.push("c", 1030 * MS, "c1", now_ns=1040 * MS)
+    a.push("b", b_capture_ms * MS, "b", now_ns=1130 * MS)
+    assert [t.start_ns // MS for t in a.pop_ready(now_ns=1130 * MS)] == released  # long before 1100 + 150 ms
+
+
 def test_newest_message_of_a_camera_wins_within_a_slot() -> None:
     a = make(cameras=("a",))
     a.push("a", 1050 * MS, "second", now_ns=1050 * MS)
