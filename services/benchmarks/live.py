@@ -239,7 +239,7 @@ def keeps_up(run: dict, bound_ms: float = LATENCY_BOUND_MS) -> tuple[bool, str]:
     if (run["frames_dropped_at_source"] or 0) > 0:
         return False, f"{run['frames_dropped_at_source']} frames dropped at the source"
     skipped, detected = run.get("frames_skipped_by_detector", 0), run.get("frames_detected", 0)
-    if run["boxes"] == "recorded" and skipped > RECORDED_SKIP_SHARE * (skipped + detected):
+    if run.get("boxes") == "recorded" and skipped > RECORDED_SKIP_SHARE * (skipped + detected):
         return False, f"the detector skipped {skipped} of {skipped + detected} frames"
     if not run["tracks_latency_p99_ms"] <= bound_ms:
         return False, f"tracks latency p99 {run['tracks_latency_p99_ms']:.0f} ms > {bound_ms:.0f} ms"

@@ -30,7 +30,10 @@ TARGETS: dict[str, Target] = {
     "tracking_cpu_ms_per_tick_1000_people_64_cameras": Target(10.0, "<= 10 ms per tick"),
     "live_latency_p99_ms": Target(150.0, "<= 150 ms at 4 cameras x 10 fps with the real detector",
                                   "(without the detector: simulator boxes)"),
-    "live_detector_latency_p99_ms": Target(150.0, "<= 150 ms at 4 cameras x 10 fps with the real detector"),
+    "live_detector_latency_p99_ms": Target(150.0, "<= 150 ms at 4 cameras x 10 fps with the real detector",
+                                           "(recorded camera folders)"),
+    "live_rendered_detector_latency_p99_ms": Target(150.0, "<= 150 ms at 4 cameras x 10 fps with the real detector",
+                                                    "(frames rendered on the same machine)"),
     "live_frames_dropped_at_source": Target(0.0, "0 at 4 cameras x 10 fps"),
 }
 
@@ -43,7 +46,7 @@ def _number(value: object) -> str:
     if isinstance(value, int):
         return str(value)
     if isinstance(value, float):
-        return f"{value:.3g}" if abs(value) < 1e4 else f"{value:.0f}"
+        return f"{value:.3g}" if abs(value) < 1e3 else f"{value:.0f}"
     return str(value)
 
 
@@ -140,23 +143,30 @@ def _live(part: dict) -> list[str]:
     lines = _live_run(part["latency_4_cameras"], part["max_cameras"], part["detector"], "simulated")
     if "detector_latency_4_cameras" in part:
         lines += _live_run(part["detector_latency_4_cameras"], part["detector_max_cameras"],
-                           "rendered frames through the detector service", "rendered")
+                           "camera folders recorded before the run, through the detector service", "recorded")
+    if "rendered_latency_4_cameras" in part:
+        lines += _live_run(part["rendered_latency_4_cameras"], None,
+                           "frames rendered during the run (as bevflow demo), through the detector service", "rendered")
     return lines
 
 
-def _live_run(run: dict, search: dict, what: str, cameras: str) -> list[str]:
+def _live_run(run: dict, search: dict | None, what: str, cameras: str) -> list[str]:
     lines = [
         f"4 cameras x 10 fps, {run['people']} people, {run['duration_s']:.0f} s, {what}:",
         f"  alerts {run['alerts']} {run['alert_types']}: frame-to-alert p50 {_number(run['live_latency_p50_ms'])} ms, "
         f"p99 {_number(run['live_latency_p99_ms'])} ms",
         f"  ticks {run['tracks_messages']}: frame-to-tracks p50 {_number(run['tracks_latency_p50_ms'])} ms, "
         f"p99 {_number(run['tracks_latency_p99_ms'])} ms",
-        f"  frames published {run['frames_published']}, dropped at the source {run['frames_dropped_at_source']}",
+        f"  frames published {run['frames_published']}, dropped at the source {run['frames_dropped_at_source']}"
+        + (f"; frames detected {run['frames_detected']}, skipped by the detector {run['frames_skipped_by_detector']}"
+           if "frames_detected" in run else ""),
         f"  CPU cores used per service: {run.get('cpu_cores_by_service', {})}",
-        f"largest number of {cameras} 10 fps cameras kept up with"
-        + (" (a lower bound: every count tried kept up)" if search["lower_bound_only"] else "")
-        + f": {search['max_cameras']}",
     ]
+    if search is None:
+        return lines
+    lines.append(f"largest number of {cameras} 10 fps cameras kept up with"
+                 + (" (a lower bound: every count tried kept up)" if search["lower_bound_only"] else "")
+                 + f": {search['max_cameras']}")
     lines += [f"  {p['cameras']:3d} cameras, {p['people']} people: " + ("kept up" if p["kept_up"] else f"NO, {p['why']}")
               + f" (tracks p99 {_number(p['tracks_latency_p99_ms'])} ms, {p['frames_dropped_at_source']} frames dropped)"
               for p in search["probes"]]

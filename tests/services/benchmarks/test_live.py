@@ -46,6 +46,11 @@ def run(**changes: object) -> dict:
         ({"tracks_messages": 80}, False, "80 ticks delivered in 10 s"),
         ({"frames_published": 0}, False, "no frame was published"),
         ({"services_died": ["tracker"]}, False, "services exited: tracker"),
+        # recorded cameras: no drops at the source to count, the detector's skipped frames instead
+        ({"boxes": "recorded", "frames_dropped_at_source": None, "frames_published": None,
+          "frames_detected": 400, "frames_skipped_by_detector": 2}, True, "kept up"),
+        ({"boxes": "recorded", "frames_dropped_at_source": None, "frames_published": None,
+          "frames_detected": 400, "frames_skipped_by_detector": 40}, False, "the detector skipped 40 of 440 frames"),
     ],
 )
 def test_keeps_up(changes: dict, ok: bool, why: str) -> None:

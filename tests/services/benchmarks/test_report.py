@@ -66,7 +66,9 @@ def every_part() -> dict:
                      {"cameras": 4, "kept_up": True, "why": "kept up", "tracks_latency_p99_ms": 40.0, "frames_dropped_at_source": 0, "people": 30},
                      {"cameras": 16, "kept_up": False, "why": "7 frames dropped at the source", "tracks_latency_p99_ms": 300.0,
                       "frames_dropped_at_source": 7, "people": 120}]},
-                 "detector_latency_4_cameras": {**run, "live_latency_p99_ms": 900.0},
+                 "detector_latency_4_cameras": {**run, "live_latency_p99_ms": 900.0, "frames_detected": 1100,
+                                                "frames_skipped_by_detector": 90},
+                 "rendered_latency_4_cameras": {**run, "live_latency_p99_ms": 1500.0},
                  "detector_max_cameras": {"max_cameras": 1, "lower_bound_only": False, "probes": [
                      {"cameras": 1, "kept_up": True, "why": "kept up", "tracks_latency_p99_ms": 120.0, "frames_dropped_at_source": 0, "people": 8},
                      {"cameras": 2, "kept_up": False, "why": "30 frames dropped at the source", "tracks_latency_p99_ms": 700.0,
@@ -86,8 +88,9 @@ def test_every_part_has_a_table() -> None:
     text = "\n".join(console_lines(result))
     for expected in ("skipped: 1000 people on 4 cameras: 2.5 people/m²", "3.3 m, 2 threads: frame 369x369 -> input 256x256: 6.2 ms p50",
                      "largest number of simulated 10 fps cameras kept up with: 8", "4 cameras, 30 people: kept up",
-                     "rendered frames through the detector service:", "p99 900 ms",
-                     "largest number of rendered 10 fps cameras kept up with: 1", "2 cameras, 15 people: NO, 30 frames dropped at the source",
+                     "camera folders recorded before the run, through the detector service:", "p99 900 ms",
+                     "frames detected 1100, skipped by the detector 90", "largest number of recorded 10 fps cameras kept up with: 1",
+                     "frames rendered during the run (as bevflow demo), through the detector service:", "p99 1500 ms", "2 cameras, 15 people: NO, 30 frames dropped at the source",
                      "16 cameras, 120 people: NO, 7 frames dropped at the source", "0 undelivered", "frame: received 30/30"):
         assert expected in text, expected
     not_run = fake_result()
