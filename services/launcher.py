@@ -123,9 +123,10 @@ def start_pipeline(group: ServiceGroup, port: int, *, boxes: str = "rendered", h
     the people in them (ingest → detector → projector → tracker → gateway). ``"simulated"``: the
     ingest publishes the simulator's noisy boxes and no detector runs (the system without the
     detector's cost). ``"recorded"``: the ingest reads each camera's ``source`` from the site file
-    (frames recorded before, or real cameras) and the detector finds the people. ``history_db``: a SQLite file (or database URL) the recorder writes and the
-    gateway reads its history from; ``TEMPORARY_DB`` puts one in the group's log folder; None runs
-    no recorder and the gateway keeps its history in memory. ``tracker_args`` default: a longer
+    (frames recorded before, or real cameras) and the detector finds the people. ``history_db``:
+    a SQLite file (or database URL) the recorder writes and the gateway reads its history from;
+    ``TEMPORARY_DB`` puts one in the group's log folder; None runs no recorder and the gateway
+    keeps its history in memory. ``tracker_args`` default: a longer
     wait for late cameras (``DETECTOR_MAX_WAIT_MS``) with the detector, none without."""
     if boxes not in BOXES:
         raise ValueError(f"boxes must be one of {', '.join(BOXES)}, got {boxes!r}")

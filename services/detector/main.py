@@ -78,8 +78,8 @@ class FrameDetector:
         self.detectors = detectors
         # Each camera's window around its reporting radius; the rest of the frame holds nobody
         # the projector would keep (``bevflow.detect.window``).
-        self.windows = {c: None if whole_frame else detection_window(site.camera(c), site.cameras[site.camera_index(c)].reporting_radius_m)
-                        for c in detectors}  # fmt: skip
+        radius = {c.id: c.reporting_radius_m for c in site.cameras}
+        self.windows = {c: None if whole_frame else detection_window(site.camera(c), radius[c]) for c in detectors}
 
     def detect(self, header: FrameHeader, image: np.ndarray) -> Detections2D:
         """Boxes of the people in ``image`` (as its ``header`` describes it), in the camera's

@@ -6,8 +6,9 @@ camera message into the tick slot of its capture time and releases a slot once e
 camera has reported for it or for a later slot, or once ``max_wait_ns`` has passed since the slot
 ended, whichever comes first. A camera's results arrive in capture order, so one that has
 reported a later capture has nothing more for the slot: a frame its detector skipped (latest
-frame wins) costs no waiting. Only cameras heard from in the last ``stale_ns`` are waited for, so a dead camera
-delays the site by at most ``max_wait_ns`` for a few seconds, then not at all, and never stops it.
+frame wins) costs no waiting. Only cameras heard from in the last ``stale_ns`` are waited for, so
+a dead camera delays the site by at most ``max_wait_ns`` for a few seconds, then not at all, and
+never stops it.
 
 What does not fit is dropped and counted, never raised: a message for a slot already released
 (too late), a timestamp far in the future (a camera clock gone wrong), an unknown camera.
