@@ -360,9 +360,10 @@ def test_services_reconnect_after_the_router_restarts(tmp_path: Path) -> None:
 
         def fresh_occupancy(since_ns: int) -> bool:
             try:
-                return get_json(f"{base}/api/occupancy", timeout=1.0)["time_ns"] > since_ns
+                time_ns = get_json(f"{base}/api/occupancy", timeout=1.0)["time_ns"]
             except (OSError, ValueError):
                 return False
+            return time_ns is not None and time_ns > since_ns  # None: no occupancy has arrived yet
 
         wait_until(lambda: fresh_occupancy(0), 60, "occupancy through the router", group)
         kill(router)
