@@ -48,8 +48,8 @@ What is scored, and why:
   to someone outside is left out, one matched to someone inside is scored wherever it lies, and
   one matched to nobody is scored when it lies inside the area. So a person 0.1 m outside the
   edge placed 0.1 m inside it is no false positive, and a person 0.1 m inside placed 0.1 m
-  outside is found (WILDTRACK's area is scored by the same rule). The tracker itself sees every
-  detection, wherever it lands.
+  outside is found (WILDTRACK's area keeps the second kind too; it has no positions past its edge
+  to leave out the first). The tracker itself sees every detection, wherever it lands.
 - MT, PT and ML are fractions of the ground-truth tracks, as in the paper's Table 2.
 - ``APE`` is the tracking one: the mean distance of the matched pairs, so it can never exceed the
   0.5 m threshold. ``box_APE`` is the projection alone: the mean floor distance between each
