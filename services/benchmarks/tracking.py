@@ -179,7 +179,7 @@ def bench_tick(people: int, cameras: int, ticks: int = 100, warmup: int = 20, se
                 profiler.disable()  # type: ignore[union-attr]
             hyp.append((step.table.id, step.table.xy))
             inputs.append(sum(len(c) for c in per_camera.values()))
-            violations.append(len(step.tracks.violations))
+            violations.append(len(step.analytics.violations))
             events.append(len(step.events))
     ms = [s * 1e3 for s in wall[warmup:]]
     stages = {stage: float(np.median(times) * 1e3) for stage, times in clock.seconds.items()}
