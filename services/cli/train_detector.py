@@ -18,6 +18,8 @@ steps, each resumable (run the same command again to continue):
   bevflow train-detector train --data data/train --out runs/a --steps 3000
   bevflow train-detector train --coco my.json --images frames/ --out runs/b   your own annotated frames (COCO,
                                                                          bbox [x,y,w,h] or rotated [cx,cy,w,h,deg])
+  bevflow train-detector train --coco my.json --init shared/bevflow/data/models/bevflow-person-centernet.onnx --out runs/c --lr 0.0005
+                                                                         fine-tune the shipped model on your frames
   bevflow train-detector export --checkpoint runs/a/checkpoint.pt --out model.onnx
   bevflow evaluate --detector --model model.onnx --images data/eval --annotations data/eval/annotations.json
 
@@ -53,6 +55,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     train.add_argument("--coco-fraction", type=float, default=0.5, metavar="F", help="share of each batch from --coco when both are given (default 0.5)")
     train.add_argument("--scale", type=float, default=1.0, metavar="F", help="resize factor for COCO images without camera_height_m/focal_px (default 1)")
     train.add_argument("--out", type=Path, required=True, metavar="DIR", help="folder for checkpoint.pt (training resumes from it)")
+    train.add_argument("--init", type=Path, metavar="FILE",
+                       help="start a new run from this exported .onnx model (e.g. the shipped one, to fine-tune it on your frames); default: random weights")  # fmt: skip
     train.add_argument("--steps", type=int, default=3000, metavar="N", help="total optimiser steps (default 3000)")
     train.add_argument("--batch", type=int, default=16, metavar="N", help="batch size (default 16)")
     train.add_argument("--crop", type=int, default=160, metavar="PX", help="training crop size, a multiple of 32 (default 160)")
@@ -106,6 +110,8 @@ def _train(args: argparse.Namespace) -> int:
         raise UserError(f"--crop must be a multiple of 32, got {args.crop}")
     if args.data is not None and not any(args.data.glob("*.npz")):
         raise UserError(f"--data {args.data} holds no .npz shards (make them with 'bevflow train-detector render')")
+    if args.init is not None and not args.init.is_file():
+        raise UserError(f"--init {args.init}: no such model file")
     try:
         coco = read_coco(args.coco, args.images) if args.coco is not None else None
     except CocoError as exc:
@@ -114,7 +120,7 @@ def _train(args: argparse.Namespace) -> int:
                                    lr=args.lr, threads=_count(args.threads, "--threads"), seed=args.seed)  # fmt: skip
     try:
         path = train_mod.train(args.data, args.out, config, log=lambda m: print(m, flush=True), coco=coco,
-                               coco_fraction=args.coco_fraction, coco_scale=args.scale)  # fmt: skip
+                               coco_fraction=args.coco_fraction, coco_scale=args.scale, init=args.init)  # fmt: skip
     except FileNotFoundError as exc:
         raise UserError(str(exc)) from None
     print(f"checkpoint: {path}")

@@ -28,6 +28,7 @@ from bevflow.detect.coco import CocoImage, rotated_to_xyxy
 from bevflow.detect.scaling import scale_factor
 from bevflow.training.augment import augment_sample, boxes_from_owner, clahe, jitter_colors, rotate_rotated_boxes
 from bevflow.training.dataset import read_shards
+from bevflow.training.export import model_from_onnx
 from bevflow.training.model import SIZE_REFERENCE_PX, STRIDE, CenterNetSmall, normalise
 
 FloatArray = NDArray[np.float64]
@@ -200,9 +201,12 @@ def train(
     coco: list[CocoImage] | None = None,
     coco_fraction: float = 0.5,
     coco_scale: float = 1.0,
+    init: Path | None = None,
 ) -> Path:
     """Train (or resume) on rendered shards in ``data`` and/or ``coco`` frames (a share
-    ``coco_fraction`` of each batch when both are given); return the checkpoint path."""
+    ``coco_fraction`` of each batch when both are given); return the checkpoint path. A new run
+    starts from the weights of the exported model ``init`` when given (fine-tuning), else from
+    random weights."""
     if data is None and not coco:
         raise ValueError("training needs rendered shards, COCO images, or both")
     torch.set_num_threads(config.threads)
@@ -223,6 +227,10 @@ def train(
     sampler = ShardSampler(data, config.crop, rng) if data is not None else None
     user = CocoSampler(coco, config.crop, rng, coco_scale) if coco else None
     share = (coco_fraction if sampler is not None else 1.0) if user is not None else 0.0
+    if step == 0 and init is not None:
+        model = model_from_onnx(init, _mixed_batch(sampler, user, share, config, rng)[0])
+        opt = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
+        log(f"starting from the weights of {init}")
     log(f"{len(sampler) if sampler else 0} rendered + {len(user) if user else 0} annotated samples; "
         f"{sum(p.numel() for p in model.parameters())} parameters")
     model.train()

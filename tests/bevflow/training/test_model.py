@@ -75,3 +75,36 @@ def test_training_resumes_from_its_checkpoint(tmp_path: Path) -> None:
     train(tmp_path / "data", tmp_path / "run", TrainConfig(steps=3, batch=2, crop=64, warmup=1, log_every=1), log=lines.append)
     assert any("resumed at step 2" in line for line in lines)
     assert torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=False)["step"] == 3
+
+
+def test_an_exported_model_reads_back_into_the_same_network(tmp_path: Path) -> None:
+    import onnxruntime as ort
+
+    from bevflow.detect.runtime import DEFAULT_MODEL
+    from bevflow.training.export import model_from_onnx
+    from bevflow.training.model import normalise
+
+    image = np.random.default_rng(0).uniform(0, 255, (2, 3, 96, 128)).astype(np.float32)
+    model = model_from_onnx(DEFAULT_MODEL, normalise(torch.from_numpy(image)))
+    with torch.no_grad():
+        ours = [t.numpy() for t in DetectorExport(model).eval()(torch.from_numpy(image))]
+        model.train()
+        train_heat = torch.sigmoid(model(normalise(torch.from_numpy(image)))[0]).numpy()
+    shipped = ort.InferenceSession(str(DEFAULT_MODEL), providers=["CPUExecutionProvider"]).run(None, {"image": image})
+    for name, a, b in zip(("heatmap", "size", "offset"), ours, shipped, strict=True):
+        assert np.abs(a - b).max() < 1e-3 * max(1.0, float(np.abs(b).max())), name
+    # On its calibration batch, train mode's batch statistics are the running ones.
+    peaks = shipped[0] > 0
+    assert np.abs(train_heat[peaks] - shipped[0][peaks]).max() < 1e-3
+
+
+def test_training_can_start_from_an_exported_model(tmp_path: Path) -> None:
+    from bevflow.detect.runtime import DEFAULT_MODEL
+    from bevflow.training.dataset import render_dataset
+
+    render_dataset(tmp_path / "data", 2, seed=3, shard_size=2)
+    lines: list[str] = []
+    train(tmp_path / "data", tmp_path / "run", TrainConfig(steps=1, batch=2, crop=64, warmup=1, log_every=1), log=lines.append, init=DEFAULT_MODEL)
+    assert any("starting from the weights of" in line for line in lines)
+    state = torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=False)["model"]
+    assert float(state["stem.0.1.running_var"].min()) != 1.0  # calibrated, not the fresh model's
