@@ -53,7 +53,11 @@ distance error, and leaving it out measured slightly better. ``score`` is the be
 lower body looks hidden where its feet cannot be rebuilt from the head (a side-view camera), so
 its floor position may be metres off. A weak view still joins a group (it confirms another
 camera's view of the person) but does not move the fused position, and a group of weak views only
-is not a person: its inputs get assignment −1.
+is not a person: its inputs get assignment −1. Those views are kept as *sightings*: a camera saw
+part of someone there and could not place them, which tells the tracker that a person it misses
+may still be standing behind someone (``bevflow.tracking.tracker``, ``coast_needs_sighting``).
+A sighting's covariance is its fit's plus ``weak_along_m`` along its camera's line of sight: its
+bearing is as good as any view's, its range is not.
 
 ``noise=None`` is the paper's fusion: the 0.45 m rule alone, and the mean weighted by score /
 range² (range: camera centre to feet), a monocular fit's error growing with range.
@@ -68,7 +72,7 @@ range² (range: camera centre to feet), a monocular fit's error growing with ran
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -93,10 +97,13 @@ class PositionNoise:
     box_fraction: float = 0.03  # box error in each image direction, as a fraction of the box size
     floor_m: float = 0.1  # the fit's own error on the floor, every direction
     head_height_m: float = 0.1  # people's height error, for feet rebuilt from the head
+    weak_along_m: float = 3.0  # a weak view's feet error along its line of sight (sightings)
 
     def __post_init__(self) -> None:
-        if not (self.box_fraction >= 0 and self.floor_m > 0 and self.head_height_m >= 0):
-            raise ValueError(f"PositionNoise needs box_fraction >= 0, floor_m > 0, head_height_m >= 0; got {self}")
+        if not (self.box_fraction >= 0 and self.floor_m > 0 and self.head_height_m >= 0 and self.weak_along_m >= 0):
+            raise ValueError(
+                f"PositionNoise needs box_fraction >= 0, floor_m > 0, head_height_m >= 0, weak_along_m >= 0; got {self}"
+            )
 
 
 @dataclass(frozen=True)
@@ -104,11 +111,13 @@ class Fusion:
     """``fused``: one row per person, ``camera`` the single camera that saw them or −1 when fused
     from several. ``assignment`` (len(input),): the fused row of each input cylinder, −1 for inputs
     dropped (non-finite feet, or in a group of weak views only). ``n_views`` (len(fused),): how many
-    cameras saw each person."""
+    cameras saw each person. ``sightings``: the weak views in no person's group, each with its
+    bearing covariance (module docstring, "Weak views")."""
 
     fused: Cylinders
     assignment: IntArray
     n_views: IntArray
+    sightings: Cylinders = field(default_factory=Cylinders.empty)
 
 
 def fuse_cylinders(
@@ -142,8 +151,9 @@ def fuse_cylinders(
         labels = _group(rows.xy, rows.camera, covariance, distance_m, gate_chi2, max_gate_m)
     strong = rows.score > 0
     real = (np.bincount(labels, weights=strong) > 0)[labels]  # in a group with a strong view
+    sightings = _sightings(rows[~real], cameras, noise or PositionNoise())
     if not real.any():
-        return Fusion(fused=Cylinders.empty(), assignment=assignment, n_views=np.zeros(0, dtype=np.int64))
+        return Fusion(Cylinders.empty(), assignment, np.zeros(0, dtype=np.int64), sightings)
     # Number the people in the order their first cylinder arrived.
     _, first, inverse = np.unique(labels[real], return_index=True, return_inverse=True)
     order = np.argsort(first)
@@ -153,7 +163,21 @@ def fuse_cylinders(
     assignment[keep[real]] = person
     weight = np.where(strong[real], 1.0, 0.0)[:, None, None] * info[real]
     fused, n_views = _merge(rows[real], person, len(order), weight, with_covariance=noise is not None)
-    return Fusion(fused=fused, assignment=assignment, n_views=n_views)
+    return Fusion(fused, assignment, n_views, sightings)
+
+
+def _sightings(weak: Cylinders, cameras: Sequence[Camera], noise: PositionNoise) -> Cylinders:
+    """The weak views that placed nobody, with their fit's covariance widened along the line of
+    sight by ``noise.weak_along_m``."""
+    if not len(weak):
+        return replace(weak, covariance=np.zeros((0, 2, 2)))
+    covariance = _carried_or_computed_covariance(weak, cameras, noise)
+    away = weak.xy - np.array([c.center[:2] for c in cameras]).reshape(-1, 2)[weak.camera]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        along = away / np.linalg.norm(away, axis=1, keepdims=True)
+    along = np.where(np.isfinite(along), along, 0.0)  # feet right below the camera: no direction
+    covariance = covariance + noise.weak_along_m**2 * along[:, :, None] * along[:, None, :]
+    return replace(weak, covariance=covariance)
 
 
 def position_covariance(

@@ -124,7 +124,7 @@ def test_rows_without_a_carried_covariance_get_the_computed_one(known):
 
 @pytest.mark.parametrize(
     "settings",
-    [{"box_fraction": -0.1}, {"floor_m": 0.0}, {"head_height_m": -1.0}, {"floor_m": math.nan}],
+    [{"box_fraction": -0.1}, {"floor_m": 0.0}, {"head_height_m": -1.0}, {"floor_m": math.nan}, {"weak_along_m": -1.0}],
 )
 def test_position_noise_rejects_bad_settings(settings):
     with pytest.raises(ValueError, match="PositionNoise"):
@@ -288,6 +288,19 @@ def test_weak_views_alone_are_no_one(mode):
     assert fusion.assignment.tolist() == [-1, -1, -1, 0]
     np.testing.assert_allclose(fusion.fused.xy, [[5.0, 5.0]])
     assert fusion.n_views.tolist() == [1]
+    np.testing.assert_allclose(fusion.sightings.xy, xy[:3])  # they are kept as sightings
+    assert fusion.sightings.camera.tolist() == [0, 0, 1]
+
+
+def test_a_sighting_is_uncertain_along_its_line_of_sight_only():
+    # Camera 0 of CROSSED stands at the origin and sees (0, 10) along +Y; a confirmed view of
+    # camera 1 elsewhere keeps the scene from being weak views alone.
+    seen = Cylinders(xy=[[0.0, 10.0], [8.0, 3.0]], camera=[0, 1], score=[0.0, 0.9])
+    noise = PositionNoise(weak_along_m=2.0)
+    sighting = fuse_cylinders(seen, CROSSED, noise=noise).sightings
+    fit = position_covariance(seen[:1], CROSSED, noise)[0]
+    np.testing.assert_allclose(sighting.covariance[0], fit + np.diag([0.0, 4.0]), atol=1e-12)
+    assert len(fuse_cylinders(seen[1:], CROSSED).sightings) == 0
 
 
 # --- edges ----------------------------------------------------------------------------------------------

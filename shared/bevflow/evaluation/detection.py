@@ -118,6 +118,8 @@ class DetectionEvaluation:
     fused: tuple[Cylinders, ...] = field(default=(), repr=False, compare=False)
     """Every evaluated frame's fused cylinders, all of them (inside the area or not): what a
     tracker downstream consumes."""
+    sightings: tuple[Cylinders, ...] = field(default=(), repr=False, compare=False)
+    """Every evaluated frame's ``Fusion.sightings`` (weak views that placed nobody)."""
 
     def as_dict(self) -> dict:
         """JSON-ready; the headline numbers (MODA, MODP, precision, recall, F1, APE, method,
@@ -208,6 +210,7 @@ def evaluate_detection(
     fused_xy: list[FloatArray] = []
     views_merged: list[FloatArray] = []
     fused_frames: list[Cylinders] = []
+    sightings: list[Cylinders] = []
     alone_gt: list[list[FloatArray]] = [[] for _ in cameras]
     alone_est: list[list[FloatArray]] = [[] for _ in cameras]
     counts = np.zeros((n_cam, 9), dtype=np.int64)  # the CameraCounts fields from boxes to outside_area
@@ -243,6 +246,7 @@ def evaluate_detection(
         fused_xy.append(fusion.fused.xy[scored])
         views_merged.append(np.asarray(fusion.n_views, dtype=np.float64)[scored])
         fused_frames.append(fusion.fused)
+        sightings.append(fusion.sightings)
     merged = np.concatenate(views_merged) if views_merged else np.zeros(0)
     return DetectionEvaluation(
         method=method,
@@ -264,4 +268,5 @@ def evaluate_detection(
             for i in range(n_cam)
         ),
         fused=tuple(fused_frames),
+        sightings=tuple(sightings),
     )

@@ -56,7 +56,7 @@ class SiteTracker:
         ``per_camera`` saw nothing this tick or did not report)."""
         seen = self._merge_cameras(per_camera)
         fusion = fuse_cylinders(seen, self.cameras, self.site.thresholds.fusion_distance_m)
-        table = self.tracker.update(fusion.fused, time_ns / 1e9)
+        table = self.tracker.update(fusion.fused, time_ns / 1e9, fusion.sightings)
         tick = self.analytics.update(time_ns, table.id, table.xy, table.velocity)
         seen_by = self._cameras_of_fused(fusion, seen.camera)
         cameras = [seen_by[d] if d >= 0 else [] for d in table.detection.tolist()]

@@ -29,7 +29,11 @@ Reported tracks: ``update`` returns the confirmed tracks matched in this update,
 coasting (missed) for at most ``report_max_misses`` consecutive updates, at their predicted
 position. Reporting a coasting track bridges a missed detection (occlusion, a detector miss):
 fewer misses and fragmentations, at the price of a false positive where the person really left.
-One update of coasting scored best overall. Against reporting matched tracks only, MOTA goes
+With ``coast_needs_sighting`` a coasting track is reported only where a camera still sees part
+of someone (a *sighting*, ``bevflow.fusion``: a cut box on a side view that placed nobody)
+within ``sighting_gate_chi2`` of its predicted feet: a person hidden behind another is still
+reported, a track whose person has gone is not. One update of coasting scored best overall.
+Against reporting matched tracks only, MOTA goes
 0.885 → 0.969 at 10 fps and 0.781 → 0.804 at 2 fps on simulated walkers (0.1 people/m²,
 10 % of detections missed, 0.1 m noise), and 0.773 → 0.799 on the WILDTRACK ground truth
 (2 fps) given the same noise and misses. Two updates gain 0.006 more at 10 fps but lose 0.021
@@ -103,9 +107,11 @@ class TrackerConfig:
     report_max_misses: int = 1
     confirm_multi_view: bool = False
     measurement_from_covariance: bool = True
+    coast_needs_sighting: bool = False
+    sighting_gate_chi2: float = 9.21
 
     def __post_init__(self) -> None:
-        for name in ("gate_m", "weak_gate_m", "measurement_std_m", "initial_speed_std_mps"):
+        for name in ("gate_m", "weak_gate_m", "measurement_std_m", "initial_speed_std_mps", "sighting_gate_chi2"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"TrackerConfig.{name} must be > 0, got {getattr(self, name)}")
         for name in ("activate_hits", "max_misses", "tentative_max_misses"):
@@ -232,9 +238,11 @@ class Tracker:
         tracks = self._tracks if include_tentative else self._tracks.select(self._tracks.confirmed)
         return tracks.table(self._time_s if self._time_s is not None else 0.0)
 
-    def update(self, cylinders: Cylinders, time_s: float) -> TrackTable:
+    def update(self, cylinders: Cylinders, time_s: float, sightings: Cylinders | None = None) -> TrackTable:
         """Advance to ``time_s`` (seconds, never decreasing) with the fused cylinders seen then,
-        and return the confirmed tracks to report (see ``TrackerConfig.report_max_misses``)."""
+        and return the confirmed tracks to report (see ``TrackerConfig.report_max_misses``).
+        ``sightings``: views that placed nobody (``Fusion.sightings``, with covariances), used
+        only by ``coast_needs_sighting``."""
         dt = self._advance_clock(time_s)
         cfg = self.config
         tracks = self._tracks
@@ -263,7 +271,22 @@ class Tracker:
         self._retire()
         self._birth(cylinders, strong & ~taken, time_s)
         report = self._tracks.confirmed & (self._tracks.misses <= cfg.report_max_misses)
+        if cfg.coast_needs_sighting:
+            coasting = np.flatnonzero(report & (self._tracks.misses > 0))
+            report[coasting] = self._sighted(coasting, sightings)
         return self._tracks.select(report).table(time_s)
+
+    def _sighted(self, rows: IntArray, sightings: Cylinders | None) -> BoolArray:
+        """Which tracks ``rows`` have a sighting within the gate of their predicted feet."""
+        if sightings is None or not len(sightings) or not len(rows):
+            return np.zeros(len(rows), dtype=bool)
+        if sightings.covariance is None:
+            raise ValueError("sightings must carry their covariance (bevflow.fusion gives them one)")
+        tracks = self._tracks
+        offset = sightings.xy[None, :, :] - tracks.state[rows, None, :2]  # (tracks, sightings, 2)
+        joint = tracks.covariance[rows, None, :2, :2] + sightings.covariance[None]
+        d2 = np.einsum("tsi,tsij,tsj->ts", offset, np.linalg.inv(joint), offset)
+        return (d2 < self.config.sighting_gate_chi2).any(axis=1)
 
     def _advance_clock(self, time_s: float) -> float:
         time_s = float(time_s)

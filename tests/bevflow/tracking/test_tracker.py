@@ -139,6 +139,41 @@ def test_coasting_track_moves_on_and_is_picked_up_again() -> None:
     assert back.id.tolist() == [1] and back.misses.tolist() == [0] and back.detection.tolist() == [0]
 
 
+def _sighting(xy: list[float], along: list[float], along_m: float = 3.0, across_m: float = 0.1) -> Cylinders:
+    """One sighting at ``xy`` whose line of sight runs along ``along`` (a unit vector)."""
+    u = np.asarray(along, dtype=float)
+    n = np.array([-u[1], u[0]])
+    covariance = along_m**2 * np.outer(u, u) + across_m**2 * np.outer(n, n)
+    return Cylinders(xy=[xy], score=[0.0], camera=[0], covariance=covariance[None])
+
+
+@pytest.mark.parametrize(
+    ("needs_sighting", "sighting", "reported"),
+    [
+        (False, None, True),  # the default: one coasting update is reported
+        (True, None, False),  # nobody seen there: the person has gone
+        (True, _sighting([1.5, 0.0], [1.0, 0.0]), True),  # 1.5 m off, but along the line of sight
+        (True, _sighting([0.0, 1.5], [1.0, 0.0]), False),  # 1.5 m off across it
+        (True, _sighting([6.0, 0.0], [1.0, 0.0]), True),  # within 3 σ along it
+        (True, _sighting([12.0, 0.0], [1.0, 0.0]), False),
+    ],
+)
+def test_a_coasting_track_may_need_a_sighting_to_be_reported(needs_sighting: bool, sighting: Cylinders | None, reported: bool) -> None:
+    tracker = Tracker(TrackerConfig(activate_hits=1, coast_needs_sighting=needs_sighting))
+    for k in range(3):
+        tracker.update(Cylinders(xy=[[0.0, 0.0]]), 0.1 * k)
+    out = tracker.update(Cylinders.empty(), 0.3, sighting)
+    assert len(out) == int(reported)
+    assert len(tracker.tracks()) == 1  # reported or not, the track lives on
+
+
+def test_sightings_without_a_covariance_are_refused() -> None:
+    tracker = Tracker(TrackerConfig(activate_hits=1, coast_needs_sighting=True))
+    tracker.update(Cylinders(xy=[[0.0, 0.0]]), 0.0)
+    with pytest.raises(ValueError, match="covariance"):
+        tracker.update(Cylinders.empty(), 0.1, Cylinders(xy=[[0.0, 0.0]]))
+
+
 def test_false_positives_that_appear_once_never_become_tracks() -> None:
     tracker = Tracker()
     reported: set[int] = set()
@@ -278,6 +313,7 @@ def test_empty_table() -> None:
         pytest.param({"measurement_std_m": -1.0}, "measurement_std_m", id="noise"),
         pytest.param({"shape_smoothing": 1.5}, "shape_smoothing", id="smoothing"),
         pytest.param({"report_max_misses": -1}, "report_max_misses", id="report"),
+        pytest.param({"sighting_gate_chi2": 0.0}, "sighting_gate_chi2", id="sighting"),
     ],
 )
 def test_config_rejects_bad_values(overrides: dict, message: str) -> None:
