@@ -185,13 +185,15 @@ def _run_suite(args: argparse.Namespace, methods: list[str]) -> int:
         raise UserError(f"--jobs must be 1 or more, got {args.jobs}")
     if args.detector and (args.jitter is not None or args.drop is not None or args.false_positives is not None):
         raise UserError("--suite --detector takes its boxes from the detector: drop --jitter, --drop and --false-positives")
-    if args.model is not None:
-        raise UserError("--suite --detector runs the shipped model; --model applies to --images only")
+    if args.model is not None and not args.detector:
+        raise UserError("--model needs --detector (the suite's boxes come from the noise model otherwise)")
+    if args.model is not None and not Path(args.model).is_file():
+        raise UserError(f"--model {args.model}: no such file")
     noise = _noise(args, suite.DEFAULT_NOISE)
     try:
         result = suite.run_suite(
             args.suite, frames_scale=scale, noise=noise, seed=args.seed, processes=args.jobs or suite.default_processes(),
-            detector=args.detector,
+            detector=args.detector, model=args.model,
         )
     except ValueError as exc:
         raise UserError(str(exc)) from None

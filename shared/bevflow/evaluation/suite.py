@@ -69,12 +69,14 @@ import os
 from collections.abc import Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
 from bevflow.camera import Camera
 from bevflow.cylinder import METHODS, fit_cylinders
+from bevflow.detect.runtime import Detector
 from bevflow.detections import Boxes, Cylinders
 from bevflow.evaluation.rendered import RenderedDetector, attribute
 from bevflow.live.site_tracker import SiteTracker
@@ -169,12 +171,14 @@ class SuiteResult:
     seed: int
     frames_scale: float
     detector: bool = False
+    model: str | None = None  # with ``detector``: the ONNX file, None for the shipped one
 
     def as_dict(self) -> dict:
         return {
             "suite": self.suite,
             "frames_scale": self.frames_scale,
             "detector": self.detector,
+            "model": self.model,
             "seed": self.seed,
             "noise": asdict(self.noise),
             "threshold_m": THRESHOLD_M,
@@ -197,14 +201,14 @@ def camera_sets(preset: Preset) -> list[tuple[str, ...]]:
     return [ids] + ([(c,) for c in ids] if len(ids) > 1 else [])
 
 
-def simulate(preset: Preset, detector: bool = False) -> SimulatedSequence:
+def simulate(preset: Preset, detector: bool = False, model: Path | None = None) -> SimulatedSequence:
     """Run the preset's scene and compute every camera's view of every frame (the slow part).
     A camera reports the people inside its ``reporting_radius_m``, as the live projector keeps
-    them. ``detector``: also render every camera's frames and run the shipped detector on them
-    (``bevflow.evaluation.rendered``; much slower)."""
+    them. ``detector``: also render every camera's frames and run the person detector on them
+    (``model``, default the shipped one; ``bevflow.evaluation.rendered``; much slower)."""
     site = preset.site
     rig = CameraRig([site.camera(c.id) for c in site.cameras], [c.reporting_radius_m for c in site.cameras], preset.obstacles())
-    rendered = RenderedDetector(site, preset.scene) if detector else None
+    rendered = RenderedDetector(site, preset.scene, Detector(model, threads=1)) if detector else None
     times, ids, feet, views, detected = [], [], [], [], []
     for frame in Scene(preset.scene).run():
         times.append(_EPOCH_NS + round(frame.time_s * 1e9))
@@ -357,11 +361,13 @@ def run_suite(
     sequences: Iterable[int] | None = None,
     processes: int = 1,
     detector: bool = False,
+    model: Path | None = None,
 ) -> SuiteResult:
     """Run a suite (only ``"paper"`` exists): rows in the order sequence, camera set, method.
     ``processes`` > 1 runs presets in parallel (each process simulates whole presets).
     ``detector``: boxes from the shipped detector on rendered frames instead of the noise model
-    (``noise`` is then unused; see ``bevflow.evaluation.rendered``)."""
+    (``noise`` is then unused; see ``bevflow.evaluation.rendered``); ``model``: another ONNX
+    detector for that."""
     if name not in SUITES:
         raise ValueError(f"unknown suite {name!r}; choose one of: {', '.join(SUITES)}")
     if seed < 0:
@@ -370,7 +376,7 @@ def run_suite(
     if unknown or not methods:
         raise ValueError(f"methods must be among {', '.join(METHODS)}, got {list(methods)}")
     presets = paper_presets(frames_scale, sequences)
-    jobs = [(p, noise, seed, tuple(methods), detector) for p in presets]
+    jobs = [(p, noise, seed, tuple(methods), detector, model) for p in presets]
     if processes > 1 and len(jobs) > 1:
         # Longest presets first, so the last one to finish is short.
         order = sorted(range(len(jobs)), key=lambda k: -_cost(presets[k]))
@@ -380,7 +386,7 @@ def run_suite(
     else:
         per_preset = [_evaluate_preset(job) for job in jobs]
     rows = tuple(row for rows in per_preset for row in rows)
-    return SuiteResult(name, rows, noise, seed, frames_scale, detector)
+    return SuiteResult(name, rows, noise, seed, frames_scale, detector, str(model) if detector and model else None)
 
 
 def default_processes() -> int:
@@ -388,9 +394,9 @@ def default_processes() -> int:
     return max(1, min(len(TABLE1), os.cpu_count() or 1))
 
 
-def _evaluate_preset(job: tuple[Preset, DetectorNoise, int, tuple[str, ...], bool]) -> list[SuiteRow]:
-    preset, noise, seed, methods, detector = job
-    return evaluate_sequence(simulate(preset, detector=detector), noise, seed, methods)
+def _evaluate_preset(job: tuple[Preset, DetectorNoise, int, tuple[str, ...], bool, Path | None]) -> list[SuiteRow]:
+    preset, noise, seed, methods, detector, model = job
+    return evaluate_sequence(simulate(preset, detector=detector, model=model), noise, seed, methods)
 
 
 def _cost(preset: Preset) -> float:

@@ -98,7 +98,7 @@ def test_the_detector_replaces_the_noise_model(detector_run: SuiteResult) -> Non
 # --- the command line (``bevflow evaluate --suite paper --detector``) ------------------------------
 @pytest.mark.parametrize(
     ("extra", "message"),
-    [(["--jitter", "0.1"], "drop --jitter"), (["--drop", "0.1"], "drop --jitter"), (["--model", "m.onnx"], "--model applies")],
+    [(["--jitter", "0.1"], "drop --jitter"), (["--drop", "0.1"], "drop --jitter"), (["--model", "no-such.onnx"], "no such file")],
 )
 def test_detector_suite_mistakes_are_user_errors(capsys: pytest.CaptureFixture, extra: list[str], message: str) -> None:
     assert main(["evaluate", "--suite", "paper", "--detector", "--frames-scale", "0.01", *extra]) == 2
@@ -115,3 +115,21 @@ def test_detector_suite_prints_both_tables_and_writes_the_rows(tmp_path: Path, c
     payload = json.loads(out.read_text())
     assert payload["detector"] is True
     assert len(payload["rows"]) == 51  # (5 sequences x 3 camera sets + 2 x 1) x 3 methods
+
+
+def test_detector_suite_runs_another_model(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    import shutil
+
+    from bevflow.detect.runtime import DEFAULT_MODEL
+
+    model = shutil.copy(DEFAULT_MODEL, tmp_path / "mine.onnx")
+    out = tmp_path / "suite.json"
+    args = ["evaluate", "--suite", "paper", "--detector", "--model", str(model), "--frames-scale", "0.005", "--jobs", "1", "--json", str(out)]
+    assert main(args) == 0
+    assert f"the detector {model} on rendered frames" in capsys.readouterr().out.splitlines()[0]
+    assert json.loads(out.read_text())["model"] == str(model)
+
+
+def test_model_without_detector_is_a_user_error(capsys: pytest.CaptureFixture) -> None:
+    assert main(["evaluate", "--suite", "paper", "--model", "m.onnx"]) == 2
+    assert "--model needs --detector" in capsys.readouterr().err
