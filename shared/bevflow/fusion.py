@@ -172,7 +172,7 @@ def _sightings(weak: Cylinders, cameras: Sequence[Camera], noise: PositionNoise)
     if not len(weak):
         return replace(weak, covariance=np.zeros((0, 2, 2)))
     covariance = _carried_or_computed_covariance(weak, cameras, noise)
-    away = weak.xy - np.array([c.center[:2] for c in cameras]).reshape(-1, 2)[weak.camera]
+    away = weak.xy - _camera_centres(cameras, weak.camera)[:, :2]
     with np.errstate(invalid="ignore", divide="ignore"):
         along = away / np.linalg.norm(away, axis=1, keepdims=True)
     along = np.where(np.isfinite(along), along, 0.0)  # feet right below the camera: no direction
@@ -246,7 +246,7 @@ def _head_height_covariance(cylinders: Cylinders, cameras: Sequence[Camera], hea
     """Along the line of sight, for feet rebuilt from the head: the head ray's run per metre of drop
     times the height error. Zero for other rows."""
     out = np.zeros((len(cylinders), 2, 2))
-    centres = np.array([c.center for c in cameras]).reshape(-1, 3)[cylinders.camera]
+    centres = _camera_centres(cameras, cylinders.camera)
     away = cylinders.xy - centres[:, :2]
     run = np.linalg.norm(away, axis=1)
     drop = centres[:, 2] - cylinders.height
@@ -256,6 +256,11 @@ def _head_height_covariance(cylinders: Cylinders, cameras: Sequence[Camera], hea
         usable = cylinders.occluded & (drop > 0) & (run > 0) & np.isfinite(variance)
     out[usable] = variance[usable, None, None] * along[usable, :, None] * along[usable, None, :]
     return out
+
+
+def _camera_centres(cameras: Sequence[Camera], index: IntArray) -> FloatArray:
+    """(N, 3) centre of the camera of each row (``index`` into ``cameras``)."""
+    return np.array([c.center for c in cameras]).reshape(-1, 3)[index]
 
 
 def _check_cameras(cylinders: Cylinders, cameras: Sequence[Camera]) -> None:
@@ -284,7 +289,7 @@ def _largest_eigenvalue(m: FloatArray) -> FloatArray:
 
 def _range_information(rows: Cylinders, cameras: Sequence[Camera]) -> FloatArray:
     """The paper-rule weights score / range², as isotropic information matrices."""
-    centres = np.array([c.center for c in cameras]).reshape(-1, 3)[rows.camera]
+    centres = _camera_centres(cameras, rows.camera)
     feet = np.concatenate([rows.xy, np.zeros((len(rows), 1))], axis=1)
     range_sq = np.maximum(((feet - centres) ** 2).sum(axis=1), 1e-6)
     return (np.maximum(rows.score, 1e-6) / range_sq)[:, None, None] * np.eye(2)
