@@ -41,6 +41,7 @@ import socket
 import threading
 import time
 from collections.abc import Callable, Iterable, Mapping
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Generic, Literal, Protocol, TypeVar
@@ -740,19 +741,55 @@ class HistorySubscription(Subscription[M]):
     cache: everything they kept when it starts (and when a publisher starts later), and any message
     it missed while running (found by sequence numbers and heartbeats, then fetched again). So a
     message can arrive twice; consumers must be idempotent (update by id). Messages from plain
-    publishers arrive too, without that recovery. ``on_message`` runs on a Zenoh thread."""
+    publishers arrive too, without that recovery. ``on_message`` runs on a Zenoh thread.
+
+    Zenoh's advanced subscriber alone can lose a publisher's cache: when it learns of a publisher
+    only after its first history query (the link came up late), a live message that overtakes the
+    cache's reply is delivered first, and the older cached messages are then discarded as stale.
+    So each publisher that appears is asked for its whole cache once more, here, off Zenoh's thread.
+    """
 
     def __init__(self, session: zenoh.Session, key: str, codec: Codec[M], on_message: Callable[[M], object],
-                 *, stats: BusStats | None = None) -> None:
+                 *, stats: BusStats | None = None, fetch_timeout_s: float = 10.0) -> None:
         self.key = key
         self.codec = codec
         self.stats = stats if stats is not None else BusStats()
         self._on_message = on_message
+        self._session = session
+        self._fetch_timeout_s = fetch_timeout_s
+        self._fetches = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"history-{key}")
         self._subscriber = zenoh.ext.declare_advanced_subscriber(
             session, key, self._on_sample,
             history=zenoh.ext.HistoryConfig(detect_late_publishers=True),
             recovery=zenoh.ext.RecoveryConfig(heartbeat=True, periodic_queries=None),
         )
+        # Each publisher's liveliness token is also the key its cache answers on.
+        self._publishers = self._subscriber.detect_publishers(self._on_publisher, history=True)
+
+    def _on_publisher(self, sample: zenoh.Sample) -> None:  # on a Zenoh thread
+        if sample.kind == zenoh.SampleKind.PUT:
+            try:
+                self._fetches.submit(self._fetch_cache, str(sample.key_expr))
+            except RuntimeError:  # closing
+                pass
+
+    def _fetch_cache(self, publisher_key: str) -> None:
+        try:
+            # Every reply has the publication's key: the default consolidation would keep only the last.
+            replies = self._session.get(publisher_key, accept_replies=zenoh.ReplyKeyExpr.ANY,
+                                        consolidation=zenoh.ConsolidationMode.NONE, target=zenoh.QueryTarget.ALL,
+                                        timeout=self._fetch_timeout_s)
+            for reply in replies:
+                if reply.ok is not None:
+                    self.stats.count("received")
+                    self._accept(reply.ok)
+        except zenoh.ZError as exc:  # the session closed under the query
+            log.debug("fetching the cache of %s failed: %s", publisher_key, exc)
+
+    def close(self) -> None:
+        _undeclare(self._publishers)
+        self._fetches.shutdown(wait=False, cancel_futures=True)
+        super().close()
 
 
 # --- liveliness ----------------------------------------------------------------------------------
