@@ -20,7 +20,9 @@ neighbours stay stable. So a camera is a suspect when it is in a shifted pair an
 pair, and the suspects that explain the most shifted pairs are named first. Two suspects that
 explain the same pairs are told apart by their other pairs, so the monitor waits while any of those
 is undecided. Two cameras that overlap only each other cannot be told apart; the event then names
-the later in site order, with the other as ``reference_camera``.
+the later in site order, with the other as ``reference_camera``. A camera is named only after it
+has stayed the explanation for ``confirm_s``: right after a move, the moved camera's pairs ramp up
+at different rates inside the window, and for a moment the slower one can look stable.
 
 Each camera gets one ``CalibrationDrift`` event when it is first named (``start_ns``; ``shift_m``
 is its most shifted pair's change), and the same event again with ``end_ns`` once all its pairs
@@ -56,7 +58,9 @@ class DriftConfig:
     how far back the current offset looks; each needs at least ``min_samples``. ``shift_m``: the
     change of a pair's offset that counts as a shift (half of it counts as stable).
     ``pair_gate_m``: how far apart two cameras' cylinders may be to pair (``isolated_pairs``).
-    ``evaluate_every_s``: how often the pairs are judged; samples are taken every tick."""
+    ``evaluate_every_s``: how often the pairs are judged; samples are taken every tick.
+    ``confirm_s``: how long a camera must stay the explanation of its shifted pairs before it is
+    named."""
 
     warmup_s: float = 300.0
     window_s: float = 120.0
@@ -65,10 +69,12 @@ class DriftConfig:
     pair_gate_m: float = 1.0
     statistic: Literal["median", "iqm"] = "median"
     evaluate_every_s: float = 1.0
+    confirm_s: float = 15.0
 
     def __post_init__(self) -> None:
-        if not (self.warmup_s >= 0 and self.window_s > 0 and self.min_samples >= 1 and self.evaluate_every_s >= 0):
-            raise ValueError("warmup_s and evaluate_every_s must be >= 0, window_s > 0 and min_samples >= 1")
+        if not (self.warmup_s >= 0 and self.window_s > 0 and self.min_samples >= 1 and self.evaluate_every_s >= 0
+                and self.confirm_s >= 0):
+            raise ValueError("warmup_s, evaluate_every_s and confirm_s must be >= 0, window_s > 0 and min_samples >= 1")
         if not (self.shift_m > 0 and self.pair_gate_m > self.shift_m):
             raise ValueError(f"need 0 < shift_m < pair_gate_m, got {self.shift_m} and {self.pair_gate_m}")
 
@@ -144,6 +150,7 @@ class DriftMonitor:
         self.config = config or DriftConfig()
         self._pairs: dict[Pair, _PairTrack] = {}
         self._active: dict[int, CalibrationDrift] = {}
+        self._suspected_ns: dict[int, int] = {}  # camera -> since when it has been the explanation
         self._evaluated_ns: int | None = None
 
     def update(self, time_ns: int, cylinders: Cylinders) -> list[CalibrationDrift]:
@@ -167,6 +174,7 @@ class DriftMonitor:
             del self._pairs[pair]
         for cam in [c for c in self._active if index is None or c == index]:
             del self._active[cam]
+        self._suspected_ns = {c: t for c, t in self._suspected_ns.items() if index is not None and c != index}
 
     @property
     def active(self) -> list[CalibrationDrift]:
@@ -191,9 +199,13 @@ class DriftMonitor:
         # Pairs of a camera already named are explained by it until it is back, whatever they do.
         open_pairs = {p: s for p, s in shifts.items() if not set(p) & set(self._active)}
         named = _explain(open_pairs, self.config.shift_m)
+        # While a moved camera's pairs ramp up inside the window, the slower one can still look
+        # stable for a moment and clear it, so that its neighbour looks guilty: name a camera only
+        # once it has stayed the explanation for confirm_s.
+        self._suspected_ns = {cam: self._suspected_ns.get(cam, time_ns) for cam in named}
         events = []
         for cam, pair in named.items():
-            if cam not in self._active:
+            if cam not in self._active and time_ns - self._suspected_ns[cam] >= self.config.confirm_s * 1e9:
                 event = CalibrationDrift(
                     id=f"calibration-drift-{self.camera_ids[cam]}-{time_ns}",
                     start_ns=time_ns,
