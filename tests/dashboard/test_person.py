@@ -7,7 +7,8 @@ from tests.dashboard.cdp import Page
 
 def test_clicking_a_person_on_the_map_shows_trajectory_and_contacts(page: Page) -> None:
     # Person 3 mills about slowly in the entrance, close to person 4: still where it was when clicked.
-    point = page.evaluate("window.bevflow.screenOf(3)")
+    # The map draws on the next animation frame after a tick arrives: wait until it has drawn 3.
+    point = page.wait_for("window.bevflow.screenOf(3)", what="person 3 on the map")
     page.click_at(point["x"], point["y"])
     page.wait_for("document.getElementById('person-panel').dataset.loaded === 'true'", what="the person panel")
     assert page.evaluate("document.getElementById('person-title').textContent") == "Person #3"
