@@ -42,6 +42,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     render.add_argument("--out", type=Path, required=True, metavar="DIR", help="folder for the shards (resumes if it has some)")
     render.add_argument("--count", type=int, default=4000, metavar="N", help="number of samples (default 4000)")
     render.add_argument("--seed", type=int, default=1, metavar="N", help="random seed (default 1)")
+    render.add_argument("--heights", type=float, nargs=2, default=[3.0, 10.0], metavar=("LOW", "HIGH"),
+                        help="camera mounting heights to draw from, metres (default 3 10; e.g. 3 5 to fine-tune for low ceilings)")
     render.set_defaults(func=_render)
     evalset = sub.add_parser("render-eval", help="render held-out whole frames with COCO annotations")
     evalset.add_argument("--out", type=Path, required=True, metavar="DIR", help="folder for the PNG frames and annotations.json")
@@ -79,7 +81,10 @@ def _count(value: int, name: str) -> int:
 def _render(args: argparse.Namespace) -> int:
     from bevflow.training.dataset import render_dataset
 
-    written = render_dataset(args.out, _count(args.count, "--count"), seed=args.seed, log=print)
+    low, high = args.heights
+    if not 2.0 <= low < high <= 20.0:
+        raise UserError(f"--heights needs 2 <= LOW < HIGH <= 20 metres, got {low:g} {high:g}")
+    written = render_dataset(args.out, _count(args.count, "--count"), seed=args.seed, log=print, heights=(low, high))
     print(f"{written} new shards in {args.out}")
     return 0
 

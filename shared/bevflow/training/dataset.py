@@ -44,14 +44,19 @@ class RenderedSample:
     focal_px: float | None = None  # the rendering camera's focal length
 
 
+MOUNTING_HEIGHTS_M = (3.0, 10.0)
+
+
 def render_sample(
-    rng: np.random.Generator, size: int | None = 288, max_people: int = 30, zoom: float = 1.0, min_pixels: int = 6
+    rng: np.random.Generator, size: int | None = 288, max_people: int = 30, zoom: float = 1.0, min_pixels: int = 6,
+    heights: tuple[float, float] = MOUNTING_HEIGHTS_M,
 ) -> RenderedSample:
     """One random window of ``size`` px (None: the whole frame) of a random ceiling fisheye frame
     at the detector's input scale times ``zoom`` (zoom > 1: a frame as a camera would deliver it,
-    larger than the detector's input). People with fewer than ``min_pixels`` visible pixels get
-    no box (a person is some 300 px at the detector's scale)."""
-    height = rng.uniform(3.0, 10.0)
+    larger than the detector's input), from a camera hanging at a height drawn from ``heights``
+    (metres, low and high). People with fewer than ``min_pixels`` visible pixels get no box (a
+    person is some 300 px at the detector's scale)."""
+    height = rng.uniform(*heights)
     cam = _random_camera(rng, height, zoom)
     w = cam.image_size[0]
     radius = w / 2.0
@@ -172,10 +177,12 @@ def read_shards(folder: Path) -> tuple[NDArray[np.uint8], NDArray[np.int16], Flo
             np.concatenate([p["heights"] for p in parts]))  # fmt: skip
 
 
-def render_dataset(folder: Path, count: int, seed: int = 0, shard_size: int = 50, log: object = None) -> int:
-    """Render ``count`` samples into ``folder`` as shards of ``shard_size``. Shard k is drawn from
-    the seed (seed, k), and existing shards are kept, so an interrupted run resumes where it
-    stopped and gives the same data. Returns the number of shards written now."""
+def render_dataset(folder: Path, count: int, seed: int = 0, shard_size: int = 50, log: object = None,
+                   heights: tuple[float, float] = MOUNTING_HEIGHTS_M) -> int:
+    """Render ``count`` samples (cameras at ``heights``, see ``render_sample``) into ``folder`` as
+    shards of ``shard_size``. Shard k is drawn from the seed (seed, k), and existing shards are
+    kept, so an interrupted run resumes where it stopped and gives the same data; shards of other
+    seeds may share the folder. Returns the number of shards written now."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     written = 0
@@ -185,7 +192,7 @@ def render_dataset(folder: Path, count: int, seed: int = 0, shard_size: int = 50
             continue
         rng = np.random.default_rng([seed, k])
         n = min(shard_size, count - k * shard_size)
-        write_shard(path.with_suffix(".tmp.npz"), [render_sample(rng) for _ in range(n)])
+        write_shard(path.with_suffix(".tmp.npz"), [render_sample(rng, heights=heights) for _ in range(n)])
         path.with_suffix(".tmp.npz").rename(path)
         written += 1
         if callable(log):

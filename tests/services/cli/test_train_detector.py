@@ -1,0 +1,30 @@
+"""``bevflow train-detector render``: options checked before anything is written."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from bevflow_services.cli import main
+
+
+@pytest.mark.parametrize(
+    ("heights", "message"),
+    [(["5", "3"], "--heights needs 2 <= LOW < HIGH <= 20 metres, got 5 3"),
+     (["1", "4"], "--heights needs 2 <= LOW < HIGH <= 20 metres, got 1 4"),
+     (["3", "30"], "--heights needs 2 <= LOW < HIGH <= 20 metres, got 3 30")],
+)
+def test_bad_heights_exit_2_and_write_nothing(tmp_path: Path, capsys: pytest.CaptureFixture, heights: list[str],
+                                              message: str) -> None:
+    out = tmp_path / "shards"
+    assert main(["train-detector", "render", "--out", str(out), "--count", "1", "--heights", *heights]) == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_render_for_low_ceilings(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    out = tmp_path / "shards"
+    assert main(["train-detector", "render", "--out", str(out), "--count", "1", "--seed", "9", "--heights", "3", "4"]) == 0
+    assert [p.name for p in out.glob("*.npz")] == ["shard-0009-00000.npz"]
+    assert "1 new shards" in capsys.readouterr().out
