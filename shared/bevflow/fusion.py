@@ -76,8 +76,6 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from bevflow.camera import Camera
@@ -328,8 +326,7 @@ def _group(
     pairs, depth = pairs[usable], depth[usable]
     if len(pairs) == 0:
         return np.arange(n)
-    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
-    _, labels = connected_components(graph, directed=False)
+    labels = _components(n, pairs[:, 0], pairs[:, 1])
     size = np.bincount(labels, minlength=labels.max() + 1)
     edges = np.bincount(labels[pairs[:, 0]], minlength=len(size))
     # Without same-camera pairs in the graph, a component with every pair linked is a clique of
@@ -342,35 +339,51 @@ def _group(
     return labels
 
 
+def _components(n: int, a: IntArray, b: IntArray) -> IntArray:
+    """Label each of ``n`` rows with the smallest row of its connected component (edges a–b).
+    Components here are the few views of one or two people, so a few rounds of taking the smaller
+    label across each edge, with pointer jumping, settle them: far cheaper per tick than building
+    a sparse graph for scipy."""
+    labels = np.arange(n)
+    while True:
+        low = np.minimum(labels[a], labels[b])
+        np.minimum.at(labels, a, low)
+        np.minimum.at(labels, b, low)
+        labels = labels[labels]
+        if (labels[a] == labels[b]).all():
+            return labels
+
+
 def _split_greedily(labels: IntArray, camera: IntArray, pairs: IntArray, depth: FloatArray) -> None:
     """Relabel the rows of tangled components in place: start from singletons and join groups along
     pairs, surest first, when the cameras are distinct and every cross pair is linked."""
-    nodes = np.unique(pairs)
+    nodes, local = np.unique(pairs, return_inverse=True)
+    local = local.reshape(pairs.shape)
     fresh = labels.max() + 1 + np.arange(len(nodes))
     labels[nodes] = fresh  # every tangled row alone, under a label no clean component uses
-    # Plain Python sets and ints: a few hundred pairs per tick, each needing a handful of
-    # membership tests, are far cheaper this way than as numpy calls.
-    group = {node: node for node in nodes.tolist()}  # row -> the row its group is named after
-    members = {node: [node] for node in group}
-    cameras = {node: 1 << int(camera[node]) for node in group}  # a bit per camera in the group
-    linked: dict[int, set[int]] = {node: set() for node in group}
-    ordered = pairs[np.argsort(depth, kind="stable")].tolist()
+    # Plain Python ints as bit sets over the tangled rows (a few hundred per tick): each pair's
+    # test is then a couple of integer operations instead of numpy calls or set comparisons.
+    k_nodes = range(len(nodes))
+    group = list(k_nodes)  # row -> the row its group is named after
+    members = [[k] for k in k_nodes]
+    mask = [1 << k for k in k_nodes]  # a group's rows
+    cameras = [1 << c for c in camera[nodes].tolist()]  # a group's cameras
+    common = [0] * len(nodes)  # the rows linked to every row of a group
+    ordered = local[np.argsort(depth, kind="stable")].tolist()
     for a, b in ordered:
-        linked[a].add(b)
-        linked[b].add(a)
+        common[a] |= 1 << b
+        common[b] |= 1 << a
     for a, b in ordered:
         ga, gb = group[a], group[b]
-        if ga == gb or cameras[ga] & cameras[gb]:
+        if ga == gb or cameras[ga] & cameras[gb] or mask[gb] & ~common[ga]:
             continue
-        joining = members[gb]
-        if all(linked[i].issuperset(joining) for i in members[ga]):
-            members[ga].extend(joining)
-            cameras[ga] |= cameras[gb]
-            for j in joining:
-                group[j] = ga
-            del members[gb], cameras[gb]
-    label_of = dict(zip(nodes.tolist(), fresh.tolist()))
-    labels[nodes] = [label_of[group[node]] for node in nodes.tolist()]
+        mask[ga] |= mask[gb]
+        cameras[ga] |= cameras[gb]
+        common[ga] &= common[gb]
+        for j in members[gb]:
+            group[j] = ga
+        members[ga] += members[gb]
+    labels[nodes] = fresh[group]
 
 
 def _merge(

@@ -8,10 +8,12 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from bevflow.camera import FisheyeCamera, PinholeCamera, rotation_from_ypr
 from bevflow.detections import Cylinders
-from bevflow.fusion import PositionNoise, fuse_cylinders, position_covariance, with_position_covariance
+from bevflow.fusion import PositionNoise, _components, fuse_cylinders, position_covariance, with_position_covariance
 
 PAPER = {"noise": None}  # the paper's rule: feet closer than 0.45 m
 DEFAULT: dict = {}
@@ -301,6 +303,24 @@ def test_a_sighting_is_uncertain_along_its_line_of_sight_only():
     fit = position_covariance(seen[:1], CROSSED, noise)[0]
     np.testing.assert_allclose(sighting.covariance[0], fit + np.diag([0.0, 4.0]), atol=1e-12)
     assert len(fuse_cylinders(seen[1:], CROSSED).sightings) == 0
+
+
+# --- grouping ---------------------------------------------------------------------------------------
+@pytest.mark.parametrize("n, edges, seed", [(1, 0, 0), (10, 0, 1), (10, 30, 2), (200, 150, 3), (200, 600, 4), (50, 20, 5)])
+def test_components_match_scipy(n: int, edges: int, seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    a, b = rng.integers(0, n, edges), rng.integers(0, n, edges)
+    labels = _components(n, a, b)
+    _, reference = connected_components(coo_matrix((np.ones(edges), (a, b)), shape=(n, n)), directed=False)
+    # The same partition, each row labelled with the smallest row of its component.
+    assert (labels[:, None] == labels[None, :]).tolist() == (reference[:, None] == reference[None, :]).tolist()
+    assert all(labels[r] == np.flatnonzero(labels == labels[r]).min() for r in range(n))
+
+
+def test_a_long_chain_is_one_component() -> None:
+    n = 1000
+    labels = _components(n, np.arange(n - 1)[::-1], np.arange(1, n)[::-1])
+    assert (labels == 0).all()
 
 
 # --- edges ----------------------------------------------------------------------------------------------

@@ -262,7 +262,7 @@ class DistanceMonitor:
         pairs = _Pairs.concat(pairs, old.take(apart))
         grouped, started = self._promote(pairs, t)
         self._pairs = pairs
-        return self._events([(ended, t, False), (grouped, t, True), (started, None, False)])
+        return self._events([(ended, t, False), (grouped, t, True), (started, None, False)], t)
 
     def _near_pairs(self, ids: IntArray, xy: FloatArray) -> tuple[IntArray, FloatArray, IntArray, IntArray]:
         """Keys and distances of every pair within the release distance, and the pair's rows."""
@@ -316,8 +316,9 @@ class DistanceMonitor:
         pairs.state[to_violation] = VIOLATION
         return grouped, pairs.take(np.flatnonzero(to_violation))
 
-    def _events(self, batches: list[tuple[_Pairs, int | None, bool]]) -> list[DistanceViolation]:
-        """Messages for batches of (pairs, end_ns, group), with one zone look-up for them all."""
+    def _events(self, batches: list[tuple[_Pairs, int | None, bool]], t: int) -> list[DistanceViolation]:
+        """Messages raised at ``t`` for batches of (pairs, end_ns, group), with one zone look-up for
+        them all."""
         where = np.concatenate([p.min_xy for p, _, _ in batches])
         if len(where) == 0:
             return []
@@ -337,6 +338,7 @@ class DistanceMonitor:
                     limit_m=self.limit_m,
                     position=(x, y),
                     group=group,
+                    raised_ns=t,
                 )
                 for (lo, hi), start, d, (x, y) in rows
             ]

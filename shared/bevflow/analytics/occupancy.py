@@ -37,15 +37,15 @@ class _CapacityAlarm:
             if count <= self.capacity:
                 return None
             self.start_ns, self.peak = t, count
-            return self.as_event(None)
+            return self.as_event(None, t)
         self.peak = max(self.peak, count)
         if count > self.release:
             return None
-        event = self.as_event(t)
+        event = self.as_event(t, t)
         self.start_ns = None
         return event
 
-    def as_event(self, end_ns: int | None) -> OverCapacity:
+    def as_event(self, end_ns: int | None, raised_ns: int) -> OverCapacity:
         assert self.start_ns is not None
         return OverCapacity(
             id=f"capacity-{self.zone or 'site'}-{self.start_ns}",
@@ -54,6 +54,7 @@ class _CapacityAlarm:
             zone=self.zone,
             capacity=self.capacity,
             peak=self.peak,
+            raised_ns=raised_ns,
         )
 
 
@@ -114,4 +115,4 @@ class OccupancyCounter:
     @property
     def open_alerts(self) -> list[OverCapacity]:
         """The over-capacity alerts open now, as their start messages with the peak so far."""
-        return [alarm.as_event(None) for _, alarm in self._alarms if alarm.start_ns is not None]
+        return [alarm.as_event(None, alarm.start_ns) for _, alarm in self._alarms if alarm.start_ns is not None]

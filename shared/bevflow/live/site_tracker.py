@@ -61,8 +61,7 @@ class SiteTracker:
         seen_by = self._cameras_of_fused(fusion, seen.camera)
         cameras = [seen_by[d] if d >= 0 else [] for d in table.detection.tolist()]
         tracks = Tracks.wire_json(self.site.site, time_ns, table, cameras, tick.zones_by_row, tick.violations.tolist())
-        events = [e.model_copy(update={"raised_ns": time_ns}) for e in tick.events]
-        return SiteStep(tracks, tick.occupancy, events, fusion, table, tick)
+        return SiteStep(tracks, tick.occupancy, tick.events, fusion, table, tick)
 
     def _merge_cameras(self, per_camera: dict[str, Cylinders]) -> Cylinders:
         """Every reporting camera's cylinders in site camera order, ``camera`` set to its index."""

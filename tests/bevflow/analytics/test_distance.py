@@ -333,9 +333,10 @@ def test_start_and_end_share_an_id_and_record_the_closest_approach() -> None:
         Zone(id="east", polygon=[(0.7, -5), (5, -5), (5, 5), (0.7, 5)]),
     ]
     published = run(DistanceMonitor(Thresholds(), zones), frames(6, stand_close))
-    (_, start), (_, end) = published
+    (started_at, start), (ended_at, end) = published
     assert start.id == end.id == f"distance-5-9-{1 * S}"
     assert start.end_ns is None and end.end_ns == round(4.1 * S)
+    assert (start.raised_ns, end.raised_ns) == (round(started_at * S), round(ended_at * S))  # the ticks that raised them
     assert start.limit_m == 2.0
     # Closest approach 1.2 m at x = 1.2, so its midpoint (0.6, 0) lies in "west"; before it, the
     # closest was the first 1.5 m sample, midpoint (0.75, 0), in "east".

@@ -80,7 +80,7 @@ def test_counts_per_zone_and_site() -> None:
 def test_zone_alert_names_its_zone() -> None:
     counter = OccupancyCounter("hall", [LEFT, RIGHT], Thresholds(capacity_hysteresis=1))
     _, events = counter.update(1 * S, *crowd(4))
-    assert events == [OverCapacity(id=f"capacity-left-{S}", start_ns=S, zone="left", capacity=3, peak=4)]
+    assert events == [OverCapacity(id=f"capacity-left-{S}", start_ns=S, zone="left", capacity=3, peak=4, raised_ns=S)]
     assert counter.open_alerts == events
     _, events = counter.update(2 * S, *crowd(2))
     assert [(e.id, e.end_ns, e.peak) for e in events] == [(f"capacity-left-{S}", 2 * S, 4)]
