@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
 
-from bevflow.detect.runtime import Detector
+from bevflow.detect.runtime import DEFAULT_RANGES, Detector, DetectorBank
 from bevflow.detect.scaling import scale_factor
 from bevflow.detect.window import Window, detection_window, scaled_window
 from bevflow.detections import Boxes
@@ -38,14 +38,17 @@ MATCH_IOU = 0.3
 
 class RenderedDetector:
     """Renders each camera of ``site`` over the static scene of ``scene`` and runs ``detector``
-    (default: the shipped model, one thread) on the frames, within each camera's detection window
+    on the frames (default: the shipped model for the camera's height, ``DEFAULT_RANGES``, one
+    thread), within each camera's detection window
     as the detector service does (``whole_frame``: on all of it). ``boxes(frame)`` gives one
     ``Boxes`` per camera, in site order, in the calibrated cameras' pixels."""
 
     def __init__(
         self, site: Site, scene: SceneConfig, detector: Detector | None = None, seed: int = 0, whole_frame: bool = False
     ) -> None:
-        self.detector = detector if detector is not None else Detector(threads=1)
+        bank = DetectorBank(DEFAULT_RANGES, threads=1)
+        self.detectors = [detector if detector is not None else bank.for_height(site.camera(c.id).center[2])
+                          for c in site.cameras]
         self.seed = seed
         self.style = RenderStyle.plain()
         room = Room.from_scene(scene)
@@ -71,9 +74,11 @@ class RenderedDetector:
         bodies = frame.primitives()
         appearance = Appearance.for_identities(frame.identity, self.seed)
         out = []
-        for renderer, factor, (x0, y0, x1, y1) in zip(self.renderers, self.factors, self.windows, strict=True):
+        for renderer, detector, factor, (x0, y0, x1, y1) in zip(
+            self.renderers, self.detectors, self.factors, self.windows, strict=True
+        ):
             image = renderer.render(bodies, frame.person_ids, appearance, self.style, self._rng).image
-            found = self.detector.detect_scaled(image[y0:y1, x0:x1], 1.0)
+            found = detector.detect_scaled(image[y0:y1, x0:x1], 1.0)
             # Window pixels → detector-scale pixels → calibrated pixels (pixel-centre coordinates).
             xyxy = found.xyxy + [x0, y0, x0, y0]
             out.append(Boxes(xyxy=(xyxy + 0.5) / factor - 0.5, confidence=found.confidence))

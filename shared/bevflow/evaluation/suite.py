@@ -205,10 +205,12 @@ def simulate(preset: Preset, detector: bool = False, model: Path | None = None) 
     """Run the preset's scene and compute every camera's view of every frame (the slow part).
     A camera reports the people inside its ``reporting_radius_m``, as the live projector keeps
     them. ``detector``: also render every camera's frames and run the person detector on them
-    (``model``, default the shipped one; ``bevflow.evaluation.rendered``; much slower)."""
+    (``model``, default the shipped one for each camera's height; ``bevflow.evaluation.rendered``;
+    much slower)."""
     site = preset.site
     rig = CameraRig([site.camera(c.id) for c in site.cameras], [c.reporting_radius_m for c in site.cameras], preset.obstacles())
-    rendered = RenderedDetector(site, preset.scene, Detector(model, threads=1)) if detector else None
+    chosen = Detector(model, threads=1) if model is not None else None  # None: by height, as live
+    rendered = RenderedDetector(site, preset.scene, chosen) if detector else None
     times, ids, feet, views, detected = [], [], [], [], []
     for frame in Scene(preset.scene).run():
         times.append(_EPOCH_NS + round(frame.time_s * 1e9))

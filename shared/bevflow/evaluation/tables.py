@@ -29,7 +29,7 @@ def format_suite(result: SuiteResult) -> str:
         f"false positives {n.false_positives:g}, truncation {'on' if n.truncation else 'off'}, seed {result.seed}"
     )
     if result.detector:
-        who = f"the detector {result.model}" if result.model else "the shipped detector"
+        who = f"the detector {result.model}" if result.model else "the shipped detectors (by camera height)"
         head = f"suite {result.suite}: frames x{result.frames_scale:g}, boxes: {who} on rendered frames"
     return "\n\n".join([head, format_table2(result.rows), format_table3(result.rows)])
 

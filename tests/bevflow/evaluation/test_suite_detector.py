@@ -110,7 +110,7 @@ def test_detector_suite_prints_both_tables_and_writes_the_rows(tmp_path: Path, c
     args = ["evaluate", "--suite", "paper", "--detector", "--frames-scale", "0.01", "--jobs", "1", "--json", str(out)]
     assert main(args) == 0
     printed = capsys.readouterr().out
-    assert "shipped detector on rendered frames" in printed.splitlines()[0]
+    assert "shipped detectors (by camera height) on rendered frames" in printed.splitlines()[0]
     assert "Table 2" in printed and "Table 3" in printed
     payload = json.loads(out.read_text())
     assert payload["detector"] is True

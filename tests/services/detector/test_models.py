@@ -4,7 +4,7 @@ from pathlib import Path
 
 import pytest
 
-from bevflow.detect.runtime import DEFAULT_MODEL, DetectorError, HeightRange
+from bevflow.detect.runtime import DEFAULT_MODEL, DEFAULT_RANGES, LOW_CEILING_MODEL, DetectorBank, DetectorError, HeightRange
 from bevflow.site import parse_site
 
 from bevflow_services.detector.models import CameraModels, resolve_model, shipped_model_names
@@ -52,9 +52,10 @@ def test_cameras_get_their_own_model_or_the_one_for_their_height(tmp_path: Path)
     models = CameraModels(site, site_dir=tmp_path, threads=3, score_threshold=0.6, load=FakeDetector)
     assert models["own"].model_path == own.resolve()
     assert models["own"].threads == 3 and models["own"].options == {"score_threshold": 0.6}
-    # Cameras naming no model: the height ranges (by default the shipped model for every height).
-    assert models["low"].model_path == DEFAULT_MODEL and models["low"] is models["high"]
-    assert models.models() == {"low": DEFAULT_MODEL.name, "high": DEFAULT_MODEL.name, "own": "own.onnx"}
+    # Cameras naming no model: the height ranges (by default the shipped low-ceiling model under
+    # 5 m, the general one above).
+    assert models["low"].model_path == LOW_CEILING_MODEL and models["high"].model_path == DEFAULT_MODEL
+    assert models.models() == {"low": LOW_CEILING_MODEL.name, "high": DEFAULT_MODEL.name, "own": "own.onnx"}
 
 
 def test_cameras_naming_the_same_file_share_one_loaded_model(tmp_path: Path) -> None:
@@ -110,3 +111,10 @@ def test_bad_height_tables_are_refused_when_the_site_is_read(table: str, message
 
     with pytest.raises(SiteError, match=message):
         parse_site((SITE % "null") + f"detectors: {table}\n")
+
+
+@pytest.mark.parametrize(("height_m", "model"), [(3.3, LOW_CEILING_MODEL), (4.99, LOW_CEILING_MODEL), (5.0, DEFAULT_MODEL),
+                                                 (8.1, DEFAULT_MODEL)])
+def test_the_shipped_models_split_at_five_metres(height_m: float, model: Path) -> None:
+    assert LOW_CEILING_MODEL.is_file() and DEFAULT_MODEL.is_file()
+    assert DetectorBank(DEFAULT_RANGES, threads=1).for_height(height_m).model_path == model
