@@ -267,7 +267,8 @@ class _RectTable:
         planes = np.concatenate([rect, area[..., None]], axis=2).transpose(2, 0, 1).astype(np.float32)
         first, needed = self.n_slots, (self.n_slots + len(tiles)) * T * T
         if needed > self.planes.shape[1]:
-            grown = np.empty((5, max(needed, 2 * self.planes.shape[1]), self.n_shapes), dtype=np.float32)
+            whole = self.slot_map.size * T * T  # never more than every tile of the reach
+            grown = np.empty((5, max(needed, min(2 * self.planes.shape[1], whole)), self.n_shapes), dtype=np.float32)
             grown[:, : first * T * T] = self.planes[:, : first * T * T]
             self.planes = grown
         self.planes[:, first * T * T : needed] = planes

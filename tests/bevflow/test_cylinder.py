@@ -15,6 +15,7 @@ from bevflow.cylinder import (
     CylinderGrid,
     box_anchor,
     fit_cylinders,
+    _RectTable,
     fit_cylinders_reference,
 )
 from bevflow.detections import Boxes
@@ -470,3 +471,17 @@ def test_boxes_that_reach_no_floor_give_nan_rows_not_errors(method: str, xyxy: l
     cam = FisheyeCamera.looking_down((0.0, 0.0, 5.5), (1280, 1280), fov_deg=185.0)
     fit = fit_cylinders(cam, Boxes(xyxy=np.array(xyxy, dtype=float)), method)
     assert len(fit) == 1 and np.isnan(fit.xy).all() and fit.score[0] == 0.0
+
+
+@pytest.mark.parametrize("max_range_m", [2.0, 6.0])
+def test_a_cameras_lookup_table_never_outgrows_its_reach(max_range_m: float) -> None:
+    # Fill every tile of the reach in uneven batches: the table doubles as it fills, but never
+    # past the whole reach.
+    table = _RectTable(fisheye(3.3), CylinderGrid(max_range_m=max_range_m))
+    side = table.slot_map.shape[0] * _RectTable.TILE
+    cells = np.stack(np.meshgrid(np.arange(side), np.arange(side), indexing="ij"), -1).reshape(-1, 2) + table.origin
+    rng = np.random.default_rng(0)
+    for part in np.array_split(rng.permutation(cells), 7):
+        table.gather(part, half_cells=0)
+        assert table.planes.shape[1] <= table.slot_map.size * _RectTable.TILE**2
+    assert table.n_slots == table.slot_map.size

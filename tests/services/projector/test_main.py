@@ -3,11 +3,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from bevflow.cylinder import box_anchor, fit_cylinders
 from bevflow.fusion import position_covariance
 from bevflow.schemas import Detections2D
 from bevflow.site import parse_site
 
-from bevflow_services.projector.main import Projector
+from bevflow_services.projector.main import Projector, fit_reach_m
 
 SITE = """
 site: hall
@@ -65,3 +66,44 @@ def test_people_beyond_the_monitored_radius_are_left_to_other_cameras(radius, ke
     boxes = [box_around(site.camera("a"), feet) for feet in ((1.0, 0.5), (4.5, 0.0))]
     result = Projector(site).project(Detections2D(camera="a", seq=1, capture_ns=5, boxes=boxes))
     assert [c.xy for c in result.cylinders] == [pytest.approx(f, abs=0.15) for f in kept]
+
+
+def box_of_part(camera, feet_xy: tuple[float, float], low: float, high: float, radius: float = 0.3) -> tuple[float, ...]:
+    x, y = feet_xy
+    corners = np.array([[x + dx, y + dy, z] for dx in (-radius, radius) for dy in (-radius, radius) for z in (low, high)])
+    uv = camera.project(corners)
+    return (*uv.min(axis=0), *uv.max(axis=0))
+
+
+@pytest.mark.parametrize("radius", [None, 2.0, 3.0])
+def test_fitting_only_near_the_reporting_radius_keeps_exactly_what_a_full_fit_keeps(radius) -> None:
+    # People all over the image, most far past the radius, a third of them seen only from the
+    # shoulders up (their boxes' anchors land far out): the projector fits boxes only as far out as
+    # a kept person's can land (so each camera's lookup table stays small), and still publishes
+    # the same cylinders as fitting every box with the default reach and dropping the far ones.
+    text = SITE if radius is None else SITE.replace("pose: {position: [0, 0, 4]}}", f"pose: {{position: [0, 0, 4]}}, monitored_radius_m: {radius}}}")
+    site = parse_site(text)
+    camera = site.camera("a")
+    rng = np.random.default_rng(3)
+    distance, angle, low = rng.uniform(0.0, 9.0, 90), rng.uniform(0, 2 * np.pi, 90), rng.choice([0.0, 0.0, 1.3], 90)
+    edge = (radius or 3.0) + 0.1  # and four seen from the shoulders up just inside the reporting radius
+    distance, angle, low = np.r_[distance, [edge] * 4], np.r_[angle, 0.0, 1.0, 2.0, 3.0], np.r_[low, [1.3] * 4]
+    boxes = [box_of_part(camera, (d * np.cos(a), d * np.sin(a)), z, 1.7) for d, a, z in zip(distance, angle, low)]
+    message = Detections2D(camera="a", seq=1, capture_ns=5, boxes=boxes)
+    full = fit_cylinders(camera, message.to_boxes(), camera_index=0)
+    reporting = site.cameras[0].reporting_radius_m
+    kept = full.near(camera.center, reporting) & np.isfinite(full.xy).all(axis=1)
+    result = Projector(site).project(message)
+    assert [c.xy for c in result.cylinders] == [pytest.approx(tuple(xy), abs=1e-9) for xy in full.xy[kept]]
+    if radius is not None:  # a kept person's anchor lay past the radius, and most people were dropped
+        anchor = camera.pixels_to_plane(box_anchor(camera, message.to_boxes()), 0.0)[:, :2]
+        assert (np.linalg.norm(anchor[kept], axis=1) > reporting).any()
+        assert 0 < len(result.cylinders) < 50
+
+
+@pytest.mark.parametrize(
+    ("height", "radius", "reach"),
+    [(4.0, None, None), (1.7, 10.0, None), (2.4, 10.0, None), (4.0, 3.0, 6.5), (5.5, 8.5, 8.5 * 5.5 / 3.5 + 0.5)],
+)
+def test_fit_reach_is_where_a_kept_persons_box_can_land(height, radius, reach) -> None:
+    assert fit_reach_m(height, radius) == (None if reach is None else pytest.approx(reach))
