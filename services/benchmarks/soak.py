@@ -15,7 +15,8 @@ input:
 - gateway: what its own subscriptions counted as dropped or rejected (``/api/health``).
 
 Memory growth is the least-squares slope of RSS over the run after ``--warmup`` seconds, in
-MiB per minute, and the difference between the last and the first sample.
+MiB per minute, over the whole run and over its second half, and the difference between the last
+and the first sample; the RSS at the start of each minute shows whether the growth levels off.
 """
 
 from __future__ import annotations
@@ -115,17 +116,28 @@ def gateway_bus_counters(base: str) -> dict[str, Any]:
         return {}
 
 
-def growth(samples: list[tuple[float, int]]) -> dict[str, float]:
-    """First, last and peak RSS (MiB), and the least-squares slope in MiB per minute."""
+def growth(samples: list[tuple[float, int]]) -> dict[str, Any]:
+    """First, last and peak RSS (MiB), the least-squares slope in MiB per minute over the whole
+    run and over its second half (near 0 there: the growth levelled off), and the RSS at the
+    start of every minute (``by_minute_mib``), the time series that tells the two apart."""
     if not samples:
-        return {"first_mib": math.nan, "last_mib": math.nan, "peak_mib": math.nan, "slope_mib_per_min": math.nan}
+        return {"first_mib": math.nan, "last_mib": math.nan, "peak_mib": math.nan, "slope_mib_per_min": math.nan,
+                "second_half_slope_mib_per_min": math.nan, "by_minute_mib": []}
+    m = [b / MiB for _, b in samples]
+    late = [s for s in samples if s[0] >= samples[-1][0] / 2]
+    by_minute = [next(b for t, b in samples if t >= 60 * k) / MiB for k in range(int(samples[-1][0] // 60) + 1)]
+    return {"first_mib": round(m[0], 1), "last_mib": round(m[-1], 1), "peak_mib": round(max(m), 1),
+            "growth_mib": round(m[-1] - m[0], 1), "slope_mib_per_min": _slope(samples),
+            "second_half_slope_mib_per_min": _slope(late), "by_minute_mib": [round(x, 1) for x in by_minute]}
+
+
+def _slope(samples: list[tuple[float, int]]) -> float:
+    """Least-squares slope of RSS over time, MiB per minute (NaN for fewer than two times)."""
     t = [s for s, _ in samples]
     m = [b / MiB for _, b in samples]
     mean_t, mean_m = sum(t) / len(t), sum(m) / len(m)
     spread = sum((x - mean_t) ** 2 for x in t)
-    slope = sum((x - mean_t) * (y - mean_m) for x, y in zip(t, m)) / spread * 60 if spread > 0 else math.nan
-    return {"first_mib": round(m[0], 1), "last_mib": round(m[-1], 1), "peak_mib": round(max(m), 1),
-            "growth_mib": round(m[-1] - m[0], 1), "slope_mib_per_min": round(slope, 2)}
+    return round(sum((x - mean_t) * (y - mean_m) for x, y in zip(t, m)) / spread * 60, 2) if spread > 0 else math.nan
 
 
 def soak(minutes: float, cameras: int, people: int | None = None, sample_every_s: float = 5.0,
@@ -199,10 +211,14 @@ def _delta(after: Any, before: Any) -> Any:
 def print_summary(result: dict[str, Any]) -> None:
     print(f"soak: {result['cameras']} cameras x {result['fps']} fps, {result['people']} people, "
           f"{result['minutes']:g} min, {result['samples']} memory samples")
-    print(f"{'service':12s} {'first MiB':>10s} {'last MiB':>10s} {'peak MiB':>10s} {'growth':>8s} {'MiB/min':>8s}")
+    print(f"{'service':12s} {'first MiB':>10s} {'last MiB':>10s} {'peak MiB':>10s} {'growth':>8s} {'MiB/min':>8s} "
+          f"{'2nd half':>8s}")
     for name, m in result["memory"].items():
         print(f"{name:12s} {m['first_mib']:10.1f} {m['last_mib']:10.1f} {m['peak_mib']:10.1f} "
-              f"{m.get('growth_mib', math.nan):8.1f} {m['slope_mib_per_min']:8.2f}")
+              f"{m.get('growth_mib', math.nan):8.1f} {m['slope_mib_per_min']:8.2f} {m['second_half_slope_mib_per_min']:8.2f}")
+    print("RSS (MiB) at the start of each minute:")
+    for name, m in result["memory"].items():
+        print(f"{name:12s} " + " ".join(f"{x:6.0f}" for x in m["by_minute_mib"]))
     for key, value in result["drops"].items():
         print(f"{key:28s} {value}")
     print(f"{'services_died':28s} {result['services_died'] or 'none'}")

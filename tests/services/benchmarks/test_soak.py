@@ -35,6 +35,15 @@ def test_growth_of_no_samples_is_unknown() -> None:
     assert math.isnan(growth([])["slope_mib_per_min"])
 
 
+def test_growth_that_levels_off_has_a_flat_second_half_and_a_minute_series() -> None:
+    # +40 MiB in the first minute, then flat for three.
+    samples = [(t, (100 + min(t, 60.0) * 40 / 60) * MiB) for t in range(0, 241, 20)]
+    result = growth([(float(t), int(b)) for t, b in samples])
+    assert result["slope_mib_per_min"] > 5
+    assert result["second_half_slope_mib_per_min"] == pytest.approx(0.0, abs=1e-6)
+    assert result["by_minute_mib"] == [100.0, 140.0, 140.0, 140.0, 140.0]
+
+
 def test_drops_are_counted_per_stage() -> None:
     log = StreamLog()
     log.on_truth(SimulatedTruth(site="s", frame=0, capture_ns=0))  # not recording yet: ignored
