@@ -44,6 +44,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     render.add_argument("--seed", type=int, default=1, metavar="N", help="random seed (default 1)")
     render.add_argument("--heights", type=float, nargs=2, default=[3.0, 10.0], metavar=("LOW", "HIGH"),
                         help="camera mounting heights to draw from, metres (default 3 10; e.g. 3 5 to fine-tune for low ceilings)")
+    render.add_argument("--groups", type=float, default=0.0, metavar="F",
+                        help="share of the people standing in tight groups, queues and huddles 0.47-0.65 m apart, 0..1 (default 0)")
     render.set_defaults(func=_render)
     evalset = sub.add_parser("render-eval", help="render held-out whole frames with COCO annotations")
     evalset.add_argument("--out", type=Path, required=True, metavar="DIR", help="folder for the PNG frames and annotations.json")
@@ -84,7 +86,10 @@ def _render(args: argparse.Namespace) -> int:
     low, high = args.heights
     if not 2.0 <= low < high <= 20.0:
         raise UserError(f"--heights needs 2 <= LOW < HIGH <= 20 metres, got {low:g} {high:g}")
-    written = render_dataset(args.out, _count(args.count, "--count"), seed=args.seed, log=print, heights=(low, high))
+    if not 0.0 <= args.groups <= 1.0:
+        raise UserError(f"--groups is a share of the people, 0 to 1, got {args.groups:g}")
+    written = render_dataset(args.out, _count(args.count, "--count"), seed=args.seed, log=print, heights=(low, high),
+                             grouped=args.groups)
     print(f"{written} new shards in {args.out}")
     return 0
 

@@ -15,6 +15,7 @@ User data in COCO JSON is read by ``bevflow.detect.coco``.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -49,13 +50,14 @@ MOUNTING_HEIGHTS_M = (3.0, 10.0)
 
 def render_sample(
     rng: np.random.Generator, size: int | None = 288, max_people: int = 30, zoom: float = 1.0, min_pixels: int = 6,
-    heights: tuple[float, float] = MOUNTING_HEIGHTS_M,
+    heights: tuple[float, float] = MOUNTING_HEIGHTS_M, grouped: float = 0.0,
 ) -> RenderedSample:
     """One random window of ``size`` px (None: the whole frame) of a random ceiling fisheye frame
     at the detector's input scale times ``zoom`` (zoom > 1: a frame as a camera would deliver it,
     larger than the detector's input), from a camera hanging at a height drawn from ``heights``
     (metres, low and high). People with fewer than ``min_pixels`` visible pixels get no box (a
-    person is some 300 px at the detector's scale)."""
+    person is some 300 px at the detector's scale). About ``grouped`` of the people stand in
+    tight groups (``_groups``)."""
     height = rng.uniform(*heights)
     cam = _random_camera(rng, height, zoom)
     w = cam.image_size[0]
@@ -73,7 +75,7 @@ def render_sample(
     window = (x0, y0, x0 + size, y0 + size)
     floor_pts = _window_floor_points(rng, cam, window, radius)
     room = _random_room(rng, height, floor_pts)
-    people_xy = _spread(rng, floor_pts, int(rng.integers(0, max_people + 1)) if rng.random() > 0.08 else 0, room)
+    people_xy = _spread(rng, floor_pts, int(rng.integers(0, max_people + 1)) if rng.random() > 0.08 else 0, room, grouped)
     n = len(people_xy)
     bodies = pose_bodies(
         BodyShape.sample(rng, n), people_xy, rng.uniform(0, 2 * np.pi, n), rng.uniform(0, 2 * np.pi, n),
@@ -138,14 +140,16 @@ def _random_room(rng: np.random.Generator, height: float, floor_pts: FloatArray)
                 pillars, tuple(shelves), clutter)  # fmt: skip
 
 
-def _spread(rng: np.random.Generator, floor_pts: FloatArray, n: int, room: Room) -> FloatArray:
-    """Up to n feet positions among the floor points, at least ~0.45 m apart, off the obstacles."""
+def _spread(rng: np.random.Generator, floor_pts: FloatArray, n: int, room: Room, grouped: float = 0.0) -> FloatArray:
+    """Up to n feet positions among the floor points, at least ~0.45 m apart, off the obstacles;
+    about ``grouped`` of them first offered in tight groups (``_groups``)."""
     x0, y0, x1, y1 = room.floor
+    shuffled = floor_pts[rng.permutation(len(floor_pts))]
+    grouped_pts = _groups(rng, shuffled, round(grouped * n)) if grouped > 0 and n > 1 else np.zeros((0, 2))
+    # Each single point's jitter is drawn only when it is offered, so ``grouped=0`` draws what it always did.
+    offered = itertools.chain(grouped_pts, (p + rng.normal(0, 0.2, 2) for p in shuffled)) if n > 0 else ()
     chosen: list[FloatArray] = []
-    for p in floor_pts[rng.permutation(len(floor_pts))]:
-        if len(chosen) >= n:
-            break
-        p = p + rng.normal(0, 0.2, 2)
+    for p in offered:
         if not (x0 + 0.3 < p[0] < x1 - 0.3 and y0 + 0.3 < p[1] < y1 - 0.3):
             continue
         if any(np.hypot(p[0] - q.x, p[1] - q.y) < q.radius + 0.3 for q in room.pillars):
@@ -155,7 +159,28 @@ def _spread(rng: np.random.Generator, floor_pts: FloatArray, n: int, room: Room)
         if chosen and np.hypot(*(np.array(chosen) - p).T).min() < 0.45:
             continue
         chosen.append(p)
+        if len(chosen) >= n:
+            break
     return np.array(chosen, dtype=np.float64).reshape(-1, 2)
+
+
+def _groups(rng: np.random.Generator, anchors: FloatArray, count: int) -> FloatArray:
+    """At least ``count`` feet positions in groups of 2–5 people 0.47–0.65 m apart, each around one
+    of ``anchors``: a queue in a line, or a huddle in a ring. In a ceiling view a queue running
+    away from the camera stacks its people along one radial streak, where one box easily covers
+    two of them."""
+    out: list[FloatArray] = []
+    for anchor in anchors:
+        if sum(len(g) for g in out) >= count:
+            break
+        k, gap, turn = int(rng.integers(2, 6)), rng.uniform(0.47, 0.65), rng.uniform(0, 2 * np.pi)
+        if rng.random() < 0.6:
+            offsets = np.arange(k)[:, None] * gap * np.array([np.cos(turn), np.sin(turn)])
+        else:
+            angle = turn + 2 * np.pi * np.arange(k) / k
+            offsets = gap / (2 * np.sin(np.pi / k)) * np.stack([np.cos(angle), np.sin(angle)], axis=1)
+        out.append(anchor + offsets + rng.normal(0, 0.02, (k, 2)))
+    return np.concatenate(out) if out else np.zeros((0, 2))
 
 
 def write_shard(path: Path, samples: list[RenderedSample]) -> None:
@@ -178,8 +203,9 @@ def read_shards(folder: Path) -> tuple[NDArray[np.uint8], NDArray[np.int16], Flo
 
 
 def render_dataset(folder: Path, count: int, seed: int = 0, shard_size: int = 50, log: object = None,
-                   heights: tuple[float, float] = MOUNTING_HEIGHTS_M) -> int:
-    """Render ``count`` samples (cameras at ``heights``, see ``render_sample``) into ``folder`` as
+                   heights: tuple[float, float] = MOUNTING_HEIGHTS_M, grouped: float = 0.0) -> int:
+    """Render ``count`` samples (cameras at ``heights``, ``grouped`` people in tight groups, see
+    ``render_sample``) into ``folder`` as
     shards of ``shard_size``. Shard k is drawn from the seed (seed, k), and existing shards are
     kept, so an interrupted run resumes where it stopped and gives the same data; shards of other
     seeds may share the folder. Returns the number of shards written now."""
@@ -192,7 +218,7 @@ def render_dataset(folder: Path, count: int, seed: int = 0, shard_size: int = 50
             continue
         rng = np.random.default_rng([seed, k])
         n = min(shard_size, count - k * shard_size)
-        write_shard(path.with_suffix(".tmp.npz"), [render_sample(rng, heights=heights) for _ in range(n)])
+        write_shard(path.with_suffix(".tmp.npz"), [render_sample(rng, heights=heights, grouped=grouped) for _ in range(n)])
         path.with_suffix(".tmp.npz").rename(path)
         written += 1
         if callable(log):

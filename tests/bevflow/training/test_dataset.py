@@ -1,5 +1,5 @@
-"""The training renders (no torch needed): mounting heights drawn from the range asked for, and
-shards that resume and share a folder across seeds."""
+"""The training renders (no torch needed): mounting heights drawn from the range asked for, people
+in tight groups when asked, and shards that resume and share a folder across seeds."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bevflow.training.dataset import read_shards, render_dataset, render_sample
+from bevflow.training.dataset import _groups, _random_room, _spread, read_shards, render_dataset, render_sample
 
 
 @pytest.mark.parametrize("heights", [(3.0, 5.0), (7.5, 10.0)])
@@ -26,3 +26,29 @@ def test_shards_of_two_seeds_share_a_folder_and_a_rerun_writes_nothing(tmp_path:
         "shard-0004-00000.npz", "shard-0004-00001.npz", "shard-0005-00000.npz"]
     _images, _owners, heights = read_shards(tmp_path)
     assert len(heights) == 3 and (heights[:2] <= 4.0).all()  # seed 4's shards come first
+
+
+def nearest_neighbour_m(xy: np.ndarray) -> np.ndarray:
+    d = np.hypot(*(xy[:, None] - xy[None]).transpose(2, 0, 1))
+    np.fill_diagonal(d, np.inf)
+    return d.min(axis=1)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_groups_are_queues_or_huddles_of_people_half_a_metre_apart(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    anchors = rng.uniform(0, 50, (10, 2))  # far apart: each group stands alone
+    xy = _groups(rng, anchors, 12)
+    assert len(xy) >= 12
+    gap = nearest_neighbour_m(xy)
+    assert (gap >= 0.40).all() and (gap <= 0.72).all(), gap
+
+
+def test_grouped_people_stand_closer_together_than_spread_ones() -> None:
+    rng = np.random.default_rng(5)
+    floor = np.stack(np.meshgrid(np.linspace(-6, 6, 40), np.linspace(-6, 6, 40)), -1).reshape(-1, 2)
+    room = _random_room(rng, 4.0, floor)
+    spread = _spread(np.random.default_rng(1), floor, 20, room)
+    grouped = _spread(np.random.default_rng(1), floor, 20, room, grouped=0.8)
+    assert len(spread) == len(grouped) == 20
+    assert np.median(nearest_neighbour_m(grouped)) < 0.7 < np.median(nearest_neighbour_m(spread))

@@ -28,3 +28,12 @@ def test_render_for_low_ceilings(tmp_path: Path, capsys: pytest.CaptureFixture) 
     assert main(["train-detector", "render", "--out", str(out), "--count", "1", "--seed", "9", "--heights", "3", "4"]) == 0
     assert [p.name for p in out.glob("*.npz")] == ["shard-0009-00000.npz"]
     assert "1 new shards" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("groups", ["-0.1", "1.5"])
+def test_a_groups_share_outside_0_to_1_exits_2_and_writes_nothing(tmp_path: Path, capsys: pytest.CaptureFixture,
+                                                                   groups: str) -> None:
+    out = tmp_path / "shards"
+    assert main(["train-detector", "render", "--out", str(out), "--count", "1", "--groups", groups]) == 2
+    assert f"--groups is a share of the people, 0 to 1, got {float(groups):g}" in capsys.readouterr().err
+    assert not out.exists()
