@@ -60,7 +60,7 @@ class Projector:
         self.method = method
         self.unknown_cameras: set[str] = set()
         self._cameras = [site.camera(c) for c in site.camera_ids]  # by index, as fusion takes them
-        reach = [fit_reach_m(float(camera.center[2]), c.reporting_radius_m) for camera, c in zip(self._cameras, site.cameras)]
+        reach = [fit_reach_m(float(cam.center[2]), c.reporting_radius_m) for cam, c in zip(self._cameras, site.cameras)]
         self._grids = [CylinderGrid() if r is None else CylinderGrid(max_range_m=r) for r in reach]
 
     def project(self, message: Detections2D) -> CameraCylinders | None:

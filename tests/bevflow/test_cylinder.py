@@ -13,9 +13,9 @@ from bevflow.camera import Camera, FisheyeCamera, PinholeCamera, rotation_from_y
 from bevflow.cylinder import (
     METHODS,
     CylinderGrid,
+    _RectTable,
     box_anchor,
     fit_cylinders,
-    _RectTable,
     fit_cylinders_reference,
 )
 from bevflow.detections import Boxes

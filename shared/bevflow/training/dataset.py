@@ -171,7 +171,7 @@ def _groups(rng: np.random.Generator, anchors: FloatArray, count: int) -> FloatA
     two of them."""
     out: list[FloatArray] = []
     for anchor in anchors:
-        if sum(len(g) for g in out) >= count:
+        if sum(map(len, out)) >= count:
             break
         k, gap, turn = int(rng.integers(2, 6)), rng.uniform(0.47, 0.65), rng.uniform(0, 2 * np.pi)
         if rng.random() < 0.6:
@@ -205,8 +205,7 @@ def read_shards(folder: Path) -> tuple[NDArray[np.uint8], NDArray[np.int16], Flo
 def render_dataset(folder: Path, count: int, seed: int = 0, shard_size: int = 50, log: object = None,
                    heights: tuple[float, float] = MOUNTING_HEIGHTS_M, grouped: float = 0.0) -> int:
     """Render ``count`` samples (cameras at ``heights``, ``grouped`` people in tight groups, see
-    ``render_sample``) into ``folder`` as
-    shards of ``shard_size``. Shard k is drawn from the seed (seed, k), and existing shards are
+    ``render_sample``) into ``folder`` as shards of ``shard_size``. Shard k is drawn from the seed (seed, k), and existing shards are
     kept, so an interrupted run resumes where it stopped and gives the same data; shards of other
     seeds may share the folder. Returns the number of shards written now."""
     folder = Path(folder)
