@@ -205,9 +205,10 @@ def read_shards(folder: Path) -> tuple[NDArray[np.uint8], NDArray[np.int16], Flo
 def render_dataset(folder: Path, count: int, seed: int = 0, shard_size: int = 50, log: object = None,
                    heights: tuple[float, float] = MOUNTING_HEIGHTS_M, grouped: float = 0.0) -> int:
     """Render ``count`` samples (cameras at ``heights``, ``grouped`` people in tight groups, see
-    ``render_sample``) into ``folder`` as shards of ``shard_size``. Shard k is drawn from the seed (seed, k), and existing shards are
-    kept, so an interrupted run resumes where it stopped and gives the same data; shards of other
-    seeds may share the folder. Returns the number of shards written now."""
+    ``render_sample``) into ``folder`` as shards of ``shard_size``. Shard k is drawn from the seed
+    (seed, k), and existing shards are kept, so an interrupted run resumes where it stopped and
+    gives the same data; shards of other seeds may share the folder. Returns the number of shards
+    written now."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     written = 0

@@ -18,11 +18,16 @@ cameras:
 """
 
 
-def box_around(camera, feet_xy: tuple[float, float], height: float = 1.7, radius: float = 0.3) -> tuple[float, ...]:
+def box_of_part(camera, feet_xy: tuple[float, float], low: float, high: float, radius: float = 0.3) -> tuple[float, ...]:
+    """The image box of a person's body from ``low`` to ``high`` metres above the floor."""
     x, y = feet_xy
-    corners = np.array([[x + dx, y + dy, z] for dx in (-radius, radius) for dy in (-radius, radius) for z in (0.0, height)])
+    corners = np.array([[x + dx, y + dy, z] for dx in (-radius, radius) for dy in (-radius, radius) for z in (low, high)])
     uv = camera.project(corners)
     return (*uv.min(axis=0), *uv.max(axis=0))
+
+
+def box_around(camera, feet_xy: tuple[float, float], height: float = 1.7) -> tuple[float, ...]:
+    return box_of_part(camera, feet_xy, 0.0, height)
 
 
 @pytest.mark.parametrize(("camera", "feet"), [("a", (1.0, 0.5)), ("b", (4.0, -1.5))])
@@ -66,13 +71,6 @@ def test_people_beyond_the_monitored_radius_are_left_to_other_cameras(radius, ke
     boxes = [box_around(site.camera("a"), feet) for feet in ((1.0, 0.5), (4.5, 0.0))]
     result = Projector(site).project(Detections2D(camera="a", seq=1, capture_ns=5, boxes=boxes))
     assert [c.xy for c in result.cylinders] == [pytest.approx(f, abs=0.15) for f in kept]
-
-
-def box_of_part(camera, feet_xy: tuple[float, float], low: float, high: float, radius: float = 0.3) -> tuple[float, ...]:
-    x, y = feet_xy
-    corners = np.array([[x + dx, y + dy, z] for dx in (-radius, radius) for dy in (-radius, radius) for z in (low, high)])
-    uv = camera.project(corners)
-    return (*uv.min(axis=0), *uv.max(axis=0))
 
 
 @pytest.mark.parametrize("radius", [None, 2.0, 3.0])
