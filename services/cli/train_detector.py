@@ -44,13 +44,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     render.add_argument("--seed", type=int, default=1, metavar="N", help="random seed (default 1)")
     render.add_argument("--heights", type=float, nargs=2, default=[3.0, 10.0], metavar=("LOW", "HIGH"),
                         help="camera mounting heights to draw from, metres (default 3 10; e.g. 3 5 to fine-tune for low ceilings)")
-    render.add_argument("--groups", type=float, default=0.0, metavar="F",
-                        help="share of the people standing in tight groups, queues and huddles 0.47-0.65 m apart, 0..1 (default 0)")
+    _scene_options(render)
     render.set_defaults(func=_render)
     evalset = sub.add_parser("render-eval", help="render held-out whole frames with COCO annotations")
     evalset.add_argument("--out", type=Path, required=True, metavar="DIR", help="folder for the PNG frames and annotations.json")
     evalset.add_argument("--count", type=int, default=100, metavar="N", help="number of frames (default 100)")
     evalset.add_argument("--seed", type=int, default=1000, metavar="N", help="random seed, unlike the training seed (default 1000)")
+    _scene_options(evalset)
     evalset.set_defaults(func=_render_eval)
     train = sub.add_parser("train", help="train (or continue training) the detector")
     train.add_argument("--data", type=Path, metavar="DIR", help="rendered shards (from 'render')")
@@ -74,6 +74,21 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     export.set_defaults(func=_export)
 
 
+def _scene_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--groups", type=float, default=0.0, metavar="F",
+                        help="share of the people standing in tight groups, queues and huddles 0.47-0.65 m apart, 0..1 (default 0)")
+    parser.add_argument("--shifted-tiles", type=float, default=0.0, metavar="F",
+                        help="share of the tiled floors whose grid is shifted off the camera, 0..1 (default 0: "
+                        "two grout lines cross under it)")  # fmt: skip
+
+
+def _shares(args: argparse.Namespace) -> dict[str, float]:
+    for name, value in (("--groups", args.groups), ("--shifted-tiles", args.shifted_tiles)):
+        if not 0.0 <= value <= 1.0:
+            raise UserError(f"{name} is a share, 0 to 1, got {value:g}")
+    return {"grouped": args.groups, "shifted_tiles": args.shifted_tiles}
+
+
 def _count(value: int, name: str) -> int:
     if value <= 0:
         raise UserError(f"{name} must be positive, got {value}")
@@ -86,10 +101,8 @@ def _render(args: argparse.Namespace) -> int:
     low, high = args.heights
     if not 2.0 <= low < high <= 20.0:
         raise UserError(f"--heights needs 2 <= LOW < HIGH <= 20 metres, got {low:g} {high:g}")
-    if not 0.0 <= args.groups <= 1.0:
-        raise UserError(f"--groups is a share of the people, 0 to 1, got {args.groups:g}")
     written = render_dataset(args.out, _count(args.count, "--count"), seed=args.seed, log=print, heights=(low, high),
-                             grouped=args.groups)
+                             **_shares(args))
     print(f"{written} new shards in {args.out}")
     return 0
 
@@ -97,7 +110,7 @@ def _render(args: argparse.Namespace) -> int:
 def _render_eval(args: argparse.Namespace) -> int:
     from bevflow.training.dataset import render_evaluation_set
 
-    path = render_evaluation_set(args.out, _count(args.count, "--count"), seed=args.seed)
+    path = render_evaluation_set(args.out, _count(args.count, "--count"), seed=args.seed, **_shares(args))
     print(f"wrote {args.count} frames and {path}")
     return 0
 

@@ -13,7 +13,7 @@ Colours are BGR floats in [0, 1], as OpenCV stores images.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import functools
 
@@ -53,9 +53,15 @@ class RenderStyle:
     blur_sigma_px: float
     noise_sigma: float  # sensor noise, in 8-bit units
     jpeg_quality: int  # 0: no compression
+    tile_origin_m: FloatArray = field(default_factory=lambda: np.zeros(2))  # where a grout cross lies
 
     @classmethod
-    def sample(cls, rng: np.random.Generator) -> RenderStyle:
+    def sample(cls, rng: np.random.Generator, shifted_tiles: float = 0.0) -> RenderStyle:
+        """A random look. The tiles are laid from the world origin, right under a training render's
+        camera, so two grout lines run straight through its image centre; with probability
+        ``shifted_tiles`` the grid is shifted, as on a real site, where a grout line passing a
+        little to the side of the camera curves past the centre. (0 draws exactly the looks it
+        always did.)"""
         base = _random_color(rng, saturation=(0.0, 0.35), value=(0.35, 0.9))
         second = np.clip(base * rng.uniform(0.6, 1.3) + rng.normal(0, 0.05, 3), 0, 1)
         tilt = rng.uniform(0, 0.6)
@@ -65,7 +71,7 @@ class RenderStyle:
         # Some cameras give clean frames: without these the detector learns that every frame is
         # blurred or noisy, and reads the crisp grout lines of a clean tiled floor as people.
         clean = rng.random() < 0.2
-        return cls(
+        style = cls(
             floor_kind=str(rng.choice(FLOOR_KINDS)),
             floor_colors=np.stack([base, second]),
             tile_size_m=float(rng.uniform(0.3, 1.2)),
@@ -88,6 +94,9 @@ class RenderStyle:
             noise_sigma=0.0 if clean else float(rng.uniform(0.0, 9.0)),
             jpeg_quality=0 if clean else int(rng.choice([0, int(rng.integers(30, 96))])),
         )
+        if shifted_tiles > 0 and rng.random() < shifted_tiles:
+            style = replace(style, tile_origin_m=rng.uniform(0, style.tile_size_m, 2))
+        return style
 
     @classmethod
     def plain(cls) -> RenderStyle:
@@ -107,10 +116,11 @@ class RenderStyle:
         noise = self.texture_at(xy / self.noise_scale_m)
         base, second = self.floor_colors
         if self.floor_kind == "tiles":
-            cell = np.floor(xy / self.tile_size_m).astype(np.int64)
+            grid = (xy - self.tile_origin_m) / self.tile_size_m
+            cell = np.floor(grid).astype(np.int64)
             checker = ((cell[:, 0] + cell[:, 1]) & 1).astype(np.float64)[:, None]
             color = base * (1 - checker) + second * checker
-            frac = xy / self.tile_size_m - cell
+            frac = grid - cell
             grout = (np.minimum(frac, 1 - frac).min(1) * self.tile_size_m < self.grout_m)[:, None]
             color = np.where(grout, color * 0.6, color)
         elif self.floor_kind == "carpet":

@@ -50,14 +50,15 @@ MOUNTING_HEIGHTS_M = (3.0, 10.0)
 
 def render_sample(
     rng: np.random.Generator, size: int | None = 288, max_people: int = 30, zoom: float = 1.0, min_pixels: int = 6,
-    heights: tuple[float, float] = MOUNTING_HEIGHTS_M, grouped: float = 0.0,
+    heights: tuple[float, float] = MOUNTING_HEIGHTS_M, grouped: float = 0.0, shifted_tiles: float = 0.0,
 ) -> RenderedSample:
     """One random window of ``size`` px (None: the whole frame) of a random ceiling fisheye frame
     at the detector's input scale times ``zoom`` (zoom > 1: a frame as a camera would deliver it,
     larger than the detector's input), from a camera hanging at a height drawn from ``heights``
     (metres, low and high). People with fewer than ``min_pixels`` visible pixels get no box (a
     person is some 300 px at the detector's scale). About ``grouped`` of the people stand in
-    tight groups (``_groups``)."""
+    tight groups (``_groups``), and about ``shifted_tiles`` of the tiled floors are laid off the
+    camera (``RenderStyle.sample``)."""
     height = rng.uniform(*heights)
     cam = _random_camera(rng, height, zoom)
     w = cam.image_size[0]
@@ -82,7 +83,8 @@ def render_sample(
         rng.uniform(0, 1.6, n), rng.choice(3, n, p=[0.6, 0.3, 0.1]),
     )  # fmt: skip
     renderer = FisheyeRenderer(cam, room, window=window, circle_radius_px=radius)
-    out = renderer.render(bodies, np.arange(n), Appearance.sample(rng, n), RenderStyle.sample(rng), rng, min_pixels=min_pixels)
+    out = renderer.render(bodies, np.arange(n), Appearance.sample(rng, n), RenderStyle.sample(rng, shifted_tiles), rng,
+                          min_pixels=min_pixels)
     owner = np.full(out.owner.shape, -1, dtype=np.int16)
     boxed = np.zeros(n + 1, dtype=bool)
     boxed[out.rows] = True
@@ -203,9 +205,9 @@ def read_shards(folder: Path) -> tuple[NDArray[np.uint8], NDArray[np.int16], Flo
 
 
 def render_dataset(folder: Path, count: int, seed: int = 0, shard_size: int = 50, log: object = None,
-                   heights: tuple[float, float] = MOUNTING_HEIGHTS_M, grouped: float = 0.0) -> int:
-    """Render ``count`` samples (cameras at ``heights``, ``grouped`` people in tight groups, see
-    ``render_sample``) into ``folder`` as shards of ``shard_size``. Shard k is drawn from the seed
+                   heights: tuple[float, float] = MOUNTING_HEIGHTS_M, grouped: float = 0.0, shifted_tiles: float = 0.0) -> int:
+    """Render ``count`` samples (cameras at ``heights``, ``grouped`` people in tight groups,
+    ``shifted_tiles`` of the floors' grids shifted, see ``render_sample``) into ``folder`` as shards of ``shard_size``. Shard k is drawn from the seed
     (seed, k), and existing shards are kept, so an interrupted run resumes where it stopped and
     gives the same data; shards of other seeds may share the folder. Returns the number of shards
     written now."""
@@ -218,7 +220,7 @@ def render_dataset(folder: Path, count: int, seed: int = 0, shard_size: int = 50
             continue
         rng = np.random.default_rng([seed, k])
         n = min(shard_size, count - k * shard_size)
-        write_shard(path.with_suffix(".tmp.npz"), [render_sample(rng, heights=heights, grouped=grouped) for _ in range(n)])
+        write_shard(path.with_suffix(".tmp.npz"), [render_sample(rng, heights=heights, grouped=grouped, shifted_tiles=shifted_tiles) for _ in range(n)])
         path.with_suffix(".tmp.npz").rename(path)
         written += 1
         if callable(log):
@@ -226,11 +228,13 @@ def render_dataset(folder: Path, count: int, seed: int = 0, shard_size: int = 50
     return written
 
 
-def render_evaluation_set(folder: Path, count: int, seed: int = 1000, zoom: tuple[float, float] = (1.0, 1.4)) -> Path:
+def render_evaluation_set(folder: Path, count: int, seed: int = 1000, zoom: tuple[float, float] = (1.0, 1.4),
+                          grouped: float = 0.0, shifted_tiles: float = 0.0) -> Path:
     """Render ``count`` whole frames (cameras 3–10 m high) as PNG files plus ``annotations.json``
     (COCO, with ``camera_height_m`` and ``focal_px`` per image) into ``folder``; frames are
     ``zoom`` times the detector's input scale, so evaluating them exercises the resize too.
-    Use a seed the training data did not use. Returns the annotation file."""
+    Use a seed the training data did not use. ``grouped`` and ``shifted_tiles`` as in
+    ``render_sample``. Returns the annotation file."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     images, boxes = [], []
@@ -238,7 +242,7 @@ def render_evaluation_set(folder: Path, count: int, seed: int = 1000, zoom: tupl
         rng = np.random.default_rng([seed, k])
         z = float(rng.uniform(*zoom))
         # Whole frames: slivers of people cut by the image circle's rim are not worth a box.
-        sample = render_sample(rng, size=None, zoom=z, min_pixels=int(30 * z * z))
+        sample = render_sample(rng, size=None, zoom=z, min_pixels=int(30 * z * z), grouped=grouped, shifted_tiles=shifted_tiles)
         name = f"frame-{k:05d}.png"
         cv2.imwrite(str(folder / name), sample.image)
         h, w = sample.image.shape[:2]

@@ -30,10 +30,11 @@ def test_render_for_low_ceilings(tmp_path: Path, capsys: pytest.CaptureFixture) 
     assert "1 new shards" in capsys.readouterr().out
 
 
-@pytest.mark.parametrize("groups", ["-0.1", "1.5"])
-def test_a_groups_share_outside_0_to_1_exits_2_and_writes_nothing(tmp_path: Path, capsys: pytest.CaptureFixture,
-                                                                   groups: str) -> None:
+@pytest.mark.parametrize("step", ["render", "render-eval"])
+@pytest.mark.parametrize(("option", "share"), [("--groups", "-0.1"), ("--groups", "1.5"), ("--shifted-tiles", "2")])
+def test_a_share_outside_0_to_1_exits_2_and_writes_nothing(tmp_path: Path, capsys: pytest.CaptureFixture, step: str,
+                                                           option: str, share: str) -> None:
     out = tmp_path / "shards"
-    assert main(["train-detector", "render", "--out", str(out), "--count", "1", "--groups", groups]) == 2
-    assert f"--groups is a share of the people, 0 to 1, got {float(groups):g}" in capsys.readouterr().err
+    assert main(["train-detector", step, "--out", str(out), "--count", "1", option, share]) == 2
+    assert f"{option} is a share, 0 to 1, got {float(share):g}" in capsys.readouterr().err
     assert not out.exists()
