@@ -8,8 +8,12 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from bevflow_services.cli import UserError
+
+if TYPE_CHECKING:
+    from bevflow.training.dataset import SceneMix
 
 EPILOG = """\
 steps, each resumable (run the same command again to continue):
@@ -80,13 +84,18 @@ def _scene_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--shifted-tiles", type=float, default=0.0, metavar="F",
                         help="share of the tiled floors whose grid is shifted off the camera, 0..1 (default 0: "
                         "two grout lines cross under it)")  # fmt: skip
+    parser.add_argument("--squared", type=float, default=0.0, metavar="F",
+                        help="share of the cameras mounted level and square to the room, 0..1 (default 0)")
 
 
-def _shares(args: argparse.Namespace) -> dict[str, float]:
-    for name, value in (("--groups", args.groups), ("--shifted-tiles", args.shifted_tiles)):
+def _mix(args: argparse.Namespace) -> SceneMix:
+    from bevflow.training.dataset import SceneMix
+
+    shares = {"--groups": args.groups, "--shifted-tiles": args.shifted_tiles, "--squared": args.squared}
+    for name, value in shares.items():
         if not 0.0 <= value <= 1.0:
             raise UserError(f"{name} is a share, 0 to 1, got {value:g}")
-    return {"grouped": args.groups, "shifted_tiles": args.shifted_tiles}
+    return SceneMix(*shares.values())
 
 
 def _count(value: int, name: str) -> int:
@@ -102,7 +111,7 @@ def _render(args: argparse.Namespace) -> int:
     if not 2.0 <= low < high <= 20.0:
         raise UserError(f"--heights needs 2 <= LOW < HIGH <= 20 metres, got {low:g} {high:g}")
     written = render_dataset(args.out, _count(args.count, "--count"), seed=args.seed, log=print, heights=(low, high),
-                             **_shares(args))
+                             mix=_mix(args))
     print(f"{written} new shards in {args.out}")
     return 0
 
@@ -110,7 +119,7 @@ def _render(args: argparse.Namespace) -> int:
 def _render_eval(args: argparse.Namespace) -> int:
     from bevflow.training.dataset import render_evaluation_set
 
-    path = render_evaluation_set(args.out, _count(args.count, "--count"), seed=args.seed, **_shares(args))
+    path = render_evaluation_set(args.out, _count(args.count, "--count"), seed=args.seed, mix=_mix(args))
     print(f"wrote {args.count} frames and {path}")
     return 0
 

@@ -41,26 +41,47 @@ class RenderedSample:
     image: NDArray[np.uint8]  # (S, S, 3) BGR
     owner: NDArray[np.int16]  # (S, S)
     camera_height_m: float
-    xyxy: FloatArray | None = None  # the boxes (pixels of the window)
+    xyxy: FloatArray | None = None  # the boxes, in the whole frame's pixels even for a window
     focal_px: float | None = None  # the rendering camera's focal length
 
 
 MOUNTING_HEIGHTS_M = (3.0, 10.0)
 
 
+@dataclass(frozen=True)
+class SceneMix:
+    """Shares of the harder cases a render draws. All 0 (the default) draws exactly the renders
+    drawn before these existed, so the seeds of older training sets still give the same data.
+
+    - ``grouped``: of the people, standing in tight groups (``_groups``).
+    - ``shifted_tiles``: of the tiled floors, laid with their grid off the camera
+      (``RenderStyle.sample``).
+    - ``squared``: of the cameras, mounted level and square to the room (yaw a multiple of 90°), as
+      installers often do. The floor's grout lines then run along the pixel rows and columns,
+      where a crisp line stays unbroken for many pixels.
+    """
+
+    grouped: float = 0.0
+    shifted_tiles: float = 0.0
+    squared: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("grouped", "shifted_tiles", "squared"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"SceneMix.{name} is a share, 0 to 1, got {getattr(self, name)}")
+
+
 def render_sample(
     rng: np.random.Generator, size: int | None = 288, max_people: int = 30, zoom: float = 1.0, min_pixels: int = 6,
-    heights: tuple[float, float] = MOUNTING_HEIGHTS_M, grouped: float = 0.0, shifted_tiles: float = 0.0,
+    heights: tuple[float, float] = MOUNTING_HEIGHTS_M, mix: SceneMix = SceneMix(),
 ) -> RenderedSample:
     """One random window of ``size`` px (None: the whole frame) of a random ceiling fisheye frame
     at the detector's input scale times ``zoom`` (zoom > 1: a frame as a camera would deliver it,
     larger than the detector's input), from a camera hanging at a height drawn from ``heights``
     (metres, low and high). People with fewer than ``min_pixels`` visible pixels get no box (a
-    person is some 300 px at the detector's scale). About ``grouped`` of the people stand in
-    tight groups (``_groups``), and about ``shifted_tiles`` of the tiled floors are laid off the
-    camera (``RenderStyle.sample``)."""
+    person is some 300 px at the detector's scale). ``mix`` draws harder cases more often."""
     height = rng.uniform(*heights)
-    cam = _random_camera(rng, height, zoom)
+    cam = _random_camera(rng, height, zoom, mix.squared)
     w = cam.image_size[0]
     radius = w / 2.0
     if size is None:
@@ -76,14 +97,14 @@ def render_sample(
     window = (x0, y0, x0 + size, y0 + size)
     floor_pts = _window_floor_points(rng, cam, window, radius)
     room = _random_room(rng, height, floor_pts)
-    people_xy = _spread(rng, floor_pts, int(rng.integers(0, max_people + 1)) if rng.random() > 0.08 else 0, room, grouped)
+    people_xy = _spread(rng, floor_pts, int(rng.integers(0, max_people + 1)) if rng.random() > 0.08 else 0, room, mix.grouped)
     n = len(people_xy)
     bodies = pose_bodies(
         BodyShape.sample(rng, n), people_xy, rng.uniform(0, 2 * np.pi, n), rng.uniform(0, 2 * np.pi, n),
         rng.uniform(0, 1.6, n), rng.choice(3, n, p=[0.6, 0.3, 0.1]),
     )  # fmt: skip
     renderer = FisheyeRenderer(cam, room, window=window, circle_radius_px=radius)
-    out = renderer.render(bodies, np.arange(n), Appearance.sample(rng, n), RenderStyle.sample(rng, shifted_tiles), rng,
+    out = renderer.render(bodies, np.arange(n), Appearance.sample(rng, n), RenderStyle.sample(rng, mix.shifted_tiles), rng,
                           min_pixels=min_pixels)
     owner = np.full(out.owner.shape, -1, dtype=np.int16)
     boxed = np.zeros(n + 1, dtype=bool)
@@ -93,7 +114,7 @@ def render_sample(
     return RenderedSample(out.image, owner, float(height), out.boxes.xyxy, float(cam.K[0, 0]))
 
 
-def _random_camera(rng: np.random.Generator, height: float, zoom: float = 1.0) -> FisheyeCamera:
+def _random_camera(rng: np.random.Generator, height: float, zoom: float = 1.0, squared: float = 0.0) -> FisheyeCamera:
     fov = rng.uniform(180.0, 200.0)
     dist = np.array([rng.uniform(-0.04, 0.01), rng.uniform(0.0, 0.003), 0.0, 0.0])
     focal = TARGET_FOCAL_PER_M * (height - SHOULDER_HEIGHT_M) * rng.uniform(0.85, 1.15) * zoom
@@ -105,6 +126,8 @@ def _random_camera(rng: np.random.Generator, height: float, zoom: float = 1.0) -
     K = np.array([[focal, 0.0, c], [0.0, focal, c], [0.0, 0.0, 1.0]])
     # Ceilings are not perfectly level: a few degrees of tilt.
     R = rotation_from_ypr(rng.uniform(0, 360), rng.normal(0, 1.5), rng.normal(0, 1.5))
+    if squared > 0 and rng.random() < squared:
+        R = rotation_from_ypr(90.0 * int(rng.integers(4)), 0.0, 0.0)
     return FisheyeCamera(K=K, dist=dist, R=R, t=-R @ np.array([0.0, 0.0, height]), image_size=(size, size))
 
 
@@ -205,9 +228,9 @@ def read_shards(folder: Path) -> tuple[NDArray[np.uint8], NDArray[np.int16], Flo
 
 
 def render_dataset(folder: Path, count: int, seed: int = 0, shard_size: int = 50, log: object = None,
-                   heights: tuple[float, float] = MOUNTING_HEIGHTS_M, grouped: float = 0.0, shifted_tiles: float = 0.0) -> int:
-    """Render ``count`` samples (cameras at ``heights``, ``grouped`` people in tight groups,
-    ``shifted_tiles`` of the floors' grids shifted, see ``render_sample``) into ``folder`` as shards of ``shard_size``. Shard k is drawn from the seed
+                   heights: tuple[float, float] = MOUNTING_HEIGHTS_M, mix: SceneMix = SceneMix()) -> int:
+    """Render ``count`` samples (cameras at ``heights``, harder cases as ``mix`` asks, see
+    ``render_sample``) into ``folder`` as shards of ``shard_size``. Shard k is drawn from the seed
     (seed, k), and existing shards are kept, so an interrupted run resumes where it stopped and
     gives the same data; shards of other seeds may share the folder. Returns the number of shards
     written now."""
@@ -220,7 +243,7 @@ def render_dataset(folder: Path, count: int, seed: int = 0, shard_size: int = 50
             continue
         rng = np.random.default_rng([seed, k])
         n = min(shard_size, count - k * shard_size)
-        write_shard(path.with_suffix(".tmp.npz"), [render_sample(rng, heights=heights, grouped=grouped, shifted_tiles=shifted_tiles) for _ in range(n)])
+        write_shard(path.with_suffix(".tmp.npz"), [render_sample(rng, heights=heights, mix=mix) for _ in range(n)])
         path.with_suffix(".tmp.npz").rename(path)
         written += 1
         if callable(log):
@@ -229,12 +252,12 @@ def render_dataset(folder: Path, count: int, seed: int = 0, shard_size: int = 50
 
 
 def render_evaluation_set(folder: Path, count: int, seed: int = 1000, zoom: tuple[float, float] = (1.0, 1.4),
-                          grouped: float = 0.0, shifted_tiles: float = 0.0) -> Path:
+                          mix: SceneMix = SceneMix()) -> Path:
     """Render ``count`` whole frames (cameras 3–10 m high) as PNG files plus ``annotations.json``
     (COCO, with ``camera_height_m`` and ``focal_px`` per image) into ``folder``; frames are
     ``zoom`` times the detector's input scale, so evaluating them exercises the resize too.
-    Use a seed the training data did not use. ``grouped`` and ``shifted_tiles`` as in
-    ``render_sample``. Returns the annotation file."""
+    Use a seed the training data did not use; ``mix`` as in ``render_sample``. Returns the
+    annotation file."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     images, boxes = [], []
@@ -242,7 +265,7 @@ def render_evaluation_set(folder: Path, count: int, seed: int = 1000, zoom: tupl
         rng = np.random.default_rng([seed, k])
         z = float(rng.uniform(*zoom))
         # Whole frames: slivers of people cut by the image circle's rim are not worth a box.
-        sample = render_sample(rng, size=None, zoom=z, min_pixels=int(30 * z * z), grouped=grouped, shifted_tiles=shifted_tiles)
+        sample = render_sample(rng, size=None, zoom=z, min_pixels=int(30 * z * z), mix=mix)
         name = f"frame-{k:05d}.png"
         cv2.imwrite(str(folder / name), sample.image)
         h, w = sample.image.shape[:2]

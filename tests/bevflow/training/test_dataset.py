@@ -1,5 +1,6 @@
 """The training renders (no torch needed): mounting heights drawn from the range asked for, people
-in tight groups when asked, and shards that resume and share a folder across seeds."""
+in tight groups and cameras square to the room when asked, and shards that resume and share a
+folder across seeds."""
 
 from __future__ import annotations
 
@@ -8,7 +9,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bevflow.training.dataset import _groups, _random_room, _spread, read_shards, render_dataset, render_sample
+from bevflow.training.dataset import (
+    SceneMix,
+    _groups,
+    _random_camera,
+    _random_room,
+    _spread,
+    read_shards,
+    render_dataset,
+    render_sample,
+)
 
 
 @pytest.mark.parametrize("heights", [(3.0, 5.0), (7.5, 10.0)])
@@ -52,3 +62,25 @@ def test_grouped_people_stand_closer_together_than_spread_ones() -> None:
     grouped = _spread(np.random.default_rng(1), floor, 20, room, grouped=0.8)
     assert len(spread) == len(grouped) == 20
     assert np.median(nearest_neighbour_m(grouped)) < 0.7 < np.median(nearest_neighbour_m(spread))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_a_squared_camera_is_level_and_turned_by_a_multiple_of_90_degrees(seed: int) -> None:
+    R = _random_camera(np.random.default_rng(seed), 4.0, squared=1.0).R
+    axes = np.abs(R[:2, :2])  # the image axes along the room's, in some order
+    np.testing.assert_allclose(np.sort(axes, axis=None), [0, 0, 1, 1], atol=1e-9)
+    assert np.isclose(abs(R[2, 2]), 1.0)  # looking straight down
+
+
+def test_the_default_mix_draws_the_renders_of_before() -> None:
+    """Shares of 0 draw nothing extra: the same rng gives the same camera with or without them."""
+    plain = _random_camera(np.random.default_rng(6), 4.0)
+    mixed = _random_camera(np.random.default_rng(6), 4.0, squared=0.0)
+    np.testing.assert_array_equal(plain.R, mixed.R)
+    assert not np.allclose(np.sort(np.abs(plain.R[:2, :2]), axis=None), [0, 0, 1, 1], atol=1e-3)  # not square
+
+
+@pytest.mark.parametrize("field", ["grouped", "shifted_tiles", "squared"])
+def test_a_share_outside_0_to_1_is_refused(field: str) -> None:
+    with pytest.raises(ValueError, match=f"SceneMix.{field} is a share"):
+        SceneMix(**{field: 1.5})

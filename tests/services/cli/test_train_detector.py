@@ -31,7 +31,8 @@ def test_render_for_low_ceilings(tmp_path: Path, capsys: pytest.CaptureFixture) 
 
 
 @pytest.mark.parametrize("step", ["render", "render-eval"])
-@pytest.mark.parametrize(("option", "share"), [("--groups", "-0.1"), ("--groups", "1.5"), ("--shifted-tiles", "2")])
+@pytest.mark.parametrize(("option", "share"), [("--groups", "-0.1"), ("--groups", "1.5"), ("--shifted-tiles", "2"),
+                                              ("--squared", "-1")])
 def test_a_share_outside_0_to_1_exits_2_and_writes_nothing(tmp_path: Path, capsys: pytest.CaptureFixture, step: str,
                                                            option: str, share: str) -> None:
     out = tmp_path / "shards"
