@@ -1,7 +1,8 @@
 """Detector speed per frame at the scaled input of 3.3, 5.5 and 8.1 m cameras, on 1 and 2 threads.
 
 ``Detector.detect`` is timed whole (resize to the height-adaptive scale, inference, decoding, NMS)
-on a rendered frame of each height (``bevflow.detect.benchmark.rendered_frame``: a crowd drawn
+with the model that serves each height (``DEFAULT_RANGES``, unless a model is given) on a
+rendered frame of each height (``bevflow.detect.benchmark.rendered_frame``: a crowd drawn
 at 1.5 x the detector's scale, as a camera's own frame is larger than the model's input). Without
 a model file (none given and none shipped) or without ONNX Runtime, nothing is timed and the
 result says why: no number is made up.
@@ -71,27 +72,27 @@ def bench_detector(
     threads: tuple[int, ...] = THREADS,
     repeats: int = 30,
     warmup: int = 3,
-    make_detector: Callable[[int], object] | None = None,
+    make_detector: Callable[[int, float], object] | None = None,
 ) -> dict:
     """One row per (height, threads): the model's input size and ms per frame, median and 90th
     percentile of wall-clock time (ONNX Runtime works on threads of its own, so the calling
-    thread's CPU time would miss most of it). ``make_detector(threads)`` overrides how a
+    thread's CPU time would miss most of it). ``make_detector(threads, height)`` overrides how a
     detector is built (tests pass a stand-in)."""
     if make_detector is None:
         reason = unavailable_reason(model)
         if reason is not None:
             return {"available": False, "reason": reason, "rows": []}
-        from bevflow.detect.runtime import Detector
+        from bevflow.detect.runtime import DEFAULT_RANGES, Detector, DetectorBank
 
-        def make_detector(n: int) -> object:
-            return Detector(model, threads=n)
+        def make_detector(n: int, height: float) -> object:
+            return Detector(model, threads=n) if model is not None else DetectorBank(DEFAULT_RANGES, threads=n).for_height(height)
 
     rows = []
     for height in heights_m:
         frame, focal = frame_for(height)
         for n in threads:
-            detector = make_detector(n)
-            shape = detector.prepare(frame, scaled_focal(height) / focal).tensor.shape  # type: ignore[attr-defined]
+            detector = make_detector(n, height)
+            shape = detector.prepare(frame, detector.scale_for(height, focal)).tensor.shape  # type: ignore[attr-defined]
             for _ in range(warmup):
                 detector.detect(frame, height, focal)  # type: ignore[attr-defined]
             timing = time_calls(lambda: detector.detect(frame, height, focal), repeats)  # type: ignore[attr-defined]

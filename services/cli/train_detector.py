@@ -49,6 +49,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     render.add_argument("--heights", type=float, nargs=2, default=[3.0, 10.0], metavar=("LOW", "HIGH"),
                         help="camera mounting heights to draw from, metres (default 3 10; e.g. 3 5 to fine-tune for low ceilings)")
     _scene_options(render)
+    render.add_argument("--zoom", type=float, default=1.0, metavar="Z",
+                        help="render at Z x the detector's scale (default 1: a person at the image centre is 20 px across); "
+                        "train with the same --zoom")  # fmt: skip
     render.set_defaults(func=_render)
     evalset = sub.add_parser("render-eval", help="render held-out whole frames with COCO annotations")
     evalset.add_argument("--out", type=Path, required=True, metavar="DIR", help="folder for the PNG frames and annotations.json")
@@ -71,6 +74,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     train.add_argument("--lr", type=float, default=2e-3, metavar="F", help="peak learning rate (default 0.002)")
     train.add_argument("--threads", type=int, default=1, metavar="N", help="CPU threads (default 1; more is slower on a busy machine)")
     train.add_argument("--seed", type=int, default=0, metavar="N", help="random seed (default 0)")
+    train.add_argument("--zoom", type=float, default=1.0, metavar="Z",
+                       help="the scale the shards were rendered at (render --zoom); COCO frames are resized to it, "
+                       "and the exported model runs at it (default 1)")  # fmt: skip
     train.set_defaults(func=_train)
     export = sub.add_parser("export", help="write a checkpoint as one ONNX file (weights inside)")
     export.add_argument("--checkpoint", type=Path, required=True, metavar="FILE", help="checkpoint.pt from 'train'")
@@ -98,6 +104,12 @@ def _mix(args: argparse.Namespace) -> SceneMix:
     return SceneMix(*shares.values())
 
 
+def _zoom(value: float) -> float:
+    if not 0.5 <= value <= 2.0:
+        raise UserError(f"--zoom is a multiple of the detector's scale, 0.5 to 2, got {value:g}")
+    return value
+
+
 def _count(value: int, name: str) -> int:
     if value <= 0:
         raise UserError(f"{name} must be positive, got {value}")
@@ -111,7 +123,7 @@ def _render(args: argparse.Namespace) -> int:
     if not 2.0 <= low < high <= 20.0:
         raise UserError(f"--heights needs 2 <= LOW < HIGH <= 20 metres, got {low:g} {high:g}")
     written = render_dataset(args.out, _count(args.count, "--count"), seed=args.seed, log=print, heights=(low, high),
-                             mix=_mix(args))
+                             mix=_mix(args), zoom=_zoom(args.zoom))
     print(f"{written} new shards in {args.out}")
     return 0
 
@@ -149,7 +161,8 @@ def _train(args: argparse.Namespace) -> int:
     except CocoError as exc:
         raise UserError(str(exc)) from None
     config = train_mod.TrainConfig(steps=_count(args.steps, "--steps"), batch=_count(args.batch, "--batch"), crop=args.crop,
-                                   lr=args.lr, threads=_count(args.threads, "--threads"), seed=args.seed)  # fmt: skip
+                                   lr=args.lr, threads=_count(args.threads, "--threads"), seed=args.seed,
+                                   zoom=_zoom(args.zoom))  # fmt: skip
     try:
         path = train_mod.train(args.data, args.out, config, log=lambda m: print(m, flush=True), coco=coco,
                                coco_fraction=args.coco_fraction, coco_scale=args.scale, init=args.init)  # fmt: skip
@@ -165,8 +178,9 @@ def _export(args: argparse.Namespace) -> int:
 
     if not args.checkpoint.is_file():
         raise UserError(f"--checkpoint {args.checkpoint} does not exist")
-    out = export_onnx(load_checkpoint(args.checkpoint), args.out)
-    print(json.dumps({"model": str(out), "bytes": out.stat().st_size}))
+    model, zoom = load_checkpoint(args.checkpoint)
+    out = export_onnx(model, args.out, zoom=zoom)
+    print(json.dumps({"model": str(out), "bytes": out.stat().st_size, "zoom": zoom}))
     return 0
 
 

@@ -48,7 +48,7 @@ def main(argv: list[str] | None = None) -> int:
         frame, focal = rendered_frame(h)
         for t in args.threads:
             det = Detector(args.model, threads=t)
-            shape = det.prepare(frame, scaled_focal(h) / focal).tensor.shape
+            shape = det.prepare(frame, det.scale_for(h, focal)).tensor.shape
             for _ in range(3):
                 det.detect(frame, h, focal)
             times = []

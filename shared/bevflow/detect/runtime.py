@@ -49,10 +49,17 @@ class PreparedInput:
     pad: tuple[float, float]
 
 
+ZOOM_METADATA_KEY = "bevflow.zoom"
+"""ONNX metadata: the model's input scale as a multiple of ``bevflow.detect.scaling``'s (a model
+trained on renders at ``render --zoom 1.2`` sees a person at the image centre 24 px across)."""
+
+
 class Detector:
     """One ONNX person detector. ``model_format`` is one of ``decoders.FORMATS`` or "auto";
     ``rgb`` and ``input_scale`` say what the model expects (defaults: BGR 0–255 for the
-    project's model and YOLOX, RGB 0–1 for YOLOv5/v8)."""
+    project's model and YOLOX, RGB 0–1 for YOLOv5/v8). ``zoom``: the frame is resized to this
+    multiple of the height-adaptive scale, read from the model file (``ZOOM_METADATA_KEY``,
+    default 1)."""
 
     def __init__(
         self,
@@ -84,12 +91,17 @@ class Detector:
         self.rgb = yolo_like if rgb is None else rgb
         self.input_scale = (1 / 255.0 if yolo_like else 1.0) if input_scale is None else input_scale
         self.score_threshold, self.nms_iou, self.person_class = score_threshold, nms_iou, person_class
+        self.zoom = _model_zoom(self.session)
 
     # --- public API ----------------------------------------------------------------------------
     def detect(self, image_bgr: NDArray[np.uint8], camera_height_m: float, focal_px: float) -> Boxes:
         """Person boxes in ``image_bgr`` (H, W, 3) of a camera ``camera_height_m`` above the floor
         whose focal length is ``focal_px`` (px/rad, K[0, 0] of its calibration)."""
-        return self.detect_scaled(image_bgr, scale_factor(camera_height_m, focal_px))
+        return self.detect_scaled(image_bgr, self.scale_for(camera_height_m, focal_px))
+
+    def scale_for(self, camera_height_m: float, focal_px: float) -> float:
+        """The resize factor from a frame of this camera to the model's input."""
+        return scale_factor(camera_height_m, focal_px) * self.zoom
 
     def detect_scaled(self, image_bgr: NDArray[np.uint8], scale: float = 1.0) -> Boxes:
         """As ``detect``, with the resize factor given directly (1.0: the frame is already at
@@ -101,7 +113,7 @@ class Detector:
     def detect_batch(self, images: Sequence[NDArray[np.uint8]], heights_m: Sequence[float], focals_px: Sequence[float]) -> list[Boxes]:
         """``detect`` for several frames; frames whose model inputs have the same size share one
         inference call (only for models with a dynamic batch axis)."""
-        prepared = [self.prepare(im, scale_factor(h, f)) for im, h, f in zip(images, heights_m, focals_px, strict=True)]
+        prepared = [self.prepare(im, self.scale_for(h, f)) for im, h, f in zip(images, heights_m, focals_px, strict=True)]
         out: list[Boxes | None] = [None] * len(prepared)
         groups: dict[tuple[int, ...], list[int]] = {}
         batched = not isinstance(self.session.get_inputs()[0].shape[0], int)
@@ -180,6 +192,18 @@ def _load_session(path: Path, threads: int) -> object:
         raise DetectorError(f"cannot load detector model {path}: {exc}") from None
 
 
+def _model_zoom(session: object) -> float:
+    meta = getattr(session, "get_modelmeta", None)  # test doubles may have none
+    value = meta().custom_metadata_map.get(ZOOM_METADATA_KEY, "1") if meta is not None else "1"
+    try:
+        zoom = float(value)
+    except ValueError:
+        raise DetectorError(f"model metadata {ZOOM_METADATA_KEY}={value!r} is not a number") from None
+    if not 0.25 <= zoom <= 4.0:
+        raise DetectorError(f"model metadata {ZOOM_METADATA_KEY}={zoom:g} is outside 0.25-4")
+    return zoom
+
+
 @dataclass(frozen=True)
 class HeightRange:
     """Cameras mounted from ``min_m`` (inclusive) to ``max_m`` (exclusive) use ``model``."""
@@ -218,8 +242,8 @@ class DetectorBank:
         return self.for_height(camera_height_m).detect(image_bgr, camera_height_m, focal_px)
 
 
-# As in the paper, one model for low ceilings and one for the rest: the shipped model (renders
-# from 3 to 10 m) fine-tuned on renders mostly from 3 to 5 m finds more people under low ceilings
-# and fewer at 5.5 m (see the model card).
+# As in the paper, one model up to 6 m and one above: the shipped model (renders from 3 to 10 m)
+# fine-tuned at 1.2 x the scale on renders from 3 to 5 m separates people standing close under
+# low ceilings, and at 5.5 m too (see the model card).
 LOW_CEILING_MODEL = DEFAULT_MODEL.with_name("bevflow-person-centernet-low.onnx")
-DEFAULT_RANGES = (HeightRange(0.0, 5.0, LOW_CEILING_MODEL), HeightRange(5.0, 100.0, None))
+DEFAULT_RANGES = (HeightRange(0.0, 6.0, LOW_CEILING_MODEL), HeightRange(6.0, 100.0, None))

@@ -23,7 +23,6 @@ from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
 
 from bevflow.detect.runtime import DEFAULT_RANGES, Detector, DetectorBank
-from bevflow.detect.scaling import scale_factor
 from bevflow.detect.window import Window, detection_window, scaled_window
 from bevflow.detections import Boxes
 from bevflow.sim.render import FisheyeRenderer, Room
@@ -55,10 +54,10 @@ class RenderedDetector:
         self.renderers: list[FisheyeRenderer] = []
         self.factors: list[float] = []
         self.windows: list[Window] = []
-        for config in site.cameras:
+        for config, camera_detector in zip(site.cameras, self.detectors, strict=True):
             camera = site.camera(config.id)
             w, _ = camera.image_size
-            ideal = scale_factor(float(camera.center[2]), float(camera.K[0, 0]))
+            ideal = camera_detector.scale_for(float(camera.center[2]), float(camera.K[0, 0]))
             # Scale by the rounded width's ratio, so boxes map back exactly (as a resized frame would).
             factor = max(int(round(w * ideal)), 1) / w
             scaled = camera.scaled(factor)

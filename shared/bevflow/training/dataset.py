@@ -228,9 +228,9 @@ def read_shards(folder: Path) -> tuple[NDArray[np.uint8], NDArray[np.int16], Flo
 
 
 def render_dataset(folder: Path, count: int, seed: int = 0, shard_size: int = 50, log: object = None,
-                   heights: tuple[float, float] = MOUNTING_HEIGHTS_M, mix: SceneMix = SceneMix()) -> int:
-    """Render ``count`` samples (cameras at ``heights``, harder cases as ``mix`` asks, see
-    ``render_sample``) into ``folder`` as shards of ``shard_size``. Shard k is drawn from the seed
+                   heights: tuple[float, float] = MOUNTING_HEIGHTS_M, mix: SceneMix = SceneMix(), zoom: float = 1.0) -> int:
+    """Render ``count`` samples (cameras at ``heights``, harder cases as ``mix`` asks, at ``zoom``
+    times the detector's scale, see ``render_sample``) into ``folder`` as shards of ``shard_size``. Shard k is drawn from the seed
     (seed, k), and existing shards are kept, so an interrupted run resumes where it stopped and
     gives the same data; shards of other seeds may share the folder. Returns the number of shards
     written now."""
@@ -243,7 +243,7 @@ def render_dataset(folder: Path, count: int, seed: int = 0, shard_size: int = 50
             continue
         rng = np.random.default_rng([seed, k])
         n = min(shard_size, count - k * shard_size)
-        write_shard(path.with_suffix(".tmp.npz"), [render_sample(rng, heights=heights, mix=mix) for _ in range(n)])
+        write_shard(path.with_suffix(".tmp.npz"), [render_sample(rng, zoom=zoom, heights=heights, mix=mix) for _ in range(n)])
         path.with_suffix(".tmp.npz").rename(path)
         written += 1
         if callable(log):

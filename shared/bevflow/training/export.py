@@ -16,20 +16,26 @@ from pathlib import Path
 import torch
 from torch import nn
 
+from bevflow.detect.runtime import ZOOM_METADATA_KEY
 from bevflow.training.model import CenterNetSmall, DetectorExport
 
 OUTPUT_NAMES = ["heatmap", "size", "offset"]
 
 
-def load_checkpoint(path: Path) -> CenterNetSmall:
+def load_checkpoint(path: Path) -> tuple[CenterNetSmall, float]:
+    """The trained network and the input scale it learnt (``TrainConfig.zoom``; 1 for
+    checkpoints older than it)."""
     state = torch.load(Path(path), map_location="cpu", weights_only=False)
     model = CenterNetSmall()
     model.load_state_dict(state["model"] if "model" in state else state)
-    return model.eval()
+    return model.eval(), float(state.get("config", {}).get("zoom", 1.0))
 
 
-def export_onnx(model: CenterNetSmall, out: Path, opset: int = 18) -> Path:
-    """Write ``model`` (with pre- and post-processing) to ``out``; weights are embedded."""
+def export_onnx(model: CenterNetSmall, out: Path, opset: int = 18, zoom: float = 1.0) -> Path:
+    """Write ``model`` (with pre- and post-processing) to ``out``; weights are embedded, and the
+    input scale it learnt is in the metadata (``ZOOM_METADATA_KEY``, which ``Detector`` reads)."""
+    import onnx
+
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     wrapper = DetectorExport(model.eval()).eval()
@@ -40,6 +46,9 @@ def export_onnx(model: CenterNetSmall, out: Path, opset: int = 18) -> Path:
             wrapper, (example,), str(out), input_names=["image"], output_names=OUTPUT_NAMES, opset_version=opset,
             dynamic_shapes={"image": {0: batch, 2: 32 * height, 3: 32 * width}}, external_data=False, dynamo=True,
         )  # fmt: skip
+    proto = onnx.load(str(out))
+    onnx.helper.set_model_props(proto, {ZOOM_METADATA_KEY: f"{zoom:g}"})
+    onnx.save(proto, str(out))
     return out
 
 

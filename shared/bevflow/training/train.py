@@ -47,6 +47,7 @@ class TrainConfig:
     checkpoint_every_s: float = 180.0
     reload_every: int = 300
     log_every: int = 25
+    zoom: float = 1.0  # the input scale learnt, × bevflow.detect.scaling's (match ``render --zoom``)
 
 
 def build_targets(boxes: FloatArray, ignore: NDArray[np.bool_], size: int) -> dict[str, NDArray]:
@@ -151,7 +152,8 @@ class CocoSampler:
     by ``scale``), rotated about its centre (rotated boxes turn with it; their enclosing
     rectangles are the targets), flipped, equalised, and cropped."""
 
-    def __init__(self, images: list[CocoImage], crop: int, rng: np.random.Generator, scale: float = 1.0) -> None:
+    def __init__(self, images: list[CocoImage], crop: int, rng: np.random.Generator, scale: float = 1.0,
+                 zoom: float = 1.0) -> None:
         self.crop, self.rng = crop, rng
         self.images: list[np.ndarray] = []
         self.rotated: list[FloatArray] = []
@@ -159,7 +161,7 @@ class CocoSampler:
             img = cv2.imread(str(entry.path), cv2.IMREAD_COLOR)
             if img is None:
                 raise FileNotFoundError(f"cannot read image {entry.path}")
-            s = scale_factor(entry.camera_height_m, entry.focal_px) if entry.camera_height_m and entry.focal_px else scale
+            s = scale_factor(entry.camera_height_m, entry.focal_px) * zoom if entry.camera_height_m and entry.focal_px else scale
             img = cv2.resize(img, None, fx=s, fy=s, interpolation=cv2.INTER_AREA)
             r = entry.rotated.copy()
             r[:, :2] = (r[:, :2] + 0.5) * s - 0.5
@@ -225,7 +227,7 @@ def train(
         rng.bit_generator.state = state["rng"]
         log(f"resumed at step {step}")
     sampler = ShardSampler(data, config.crop, rng) if data is not None else None
-    user = CocoSampler(coco, config.crop, rng, coco_scale) if coco else None
+    user = CocoSampler(coco, config.crop, rng, coco_scale, config.zoom) if coco else None
     share = (coco_fraction if sampler is not None else 1.0) if user is not None else 0.0
     if step == 0 and init is not None:
         model = model_from_onnx(init, _mixed_batch(sampler, user, share, config, rng)[0])

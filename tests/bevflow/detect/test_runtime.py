@@ -15,10 +15,14 @@ class FakeCenterNet:
     """An ONNX-Runtime-like session that 'detects' one box centred on the input's brightest pixel,
     20 x 30 input pixels, and records what it was given."""
 
-    def __init__(self, fixed_hw: tuple[int, int] | None = None) -> None:
+    def __init__(self, fixed_hw: tuple[int, int] | None = None, metadata: dict[str, str] | None = None) -> None:
         shape = [1, 3, *(fixed_hw or ("h", "w"))] if fixed_hw else ["batch", 3, "h", "w"]
         self.inputs = [SimpleNamespace(name="image", shape=shape)]
+        self.metadata = metadata or {}
         self.seen: list[np.ndarray] = []
+
+    def get_modelmeta(self):  # noqa: ANN201
+        return SimpleNamespace(custom_metadata_map=self.metadata)
 
     def get_inputs(self):  # noqa: ANN201
         return self.inputs
@@ -49,12 +53,18 @@ def _frame(w: int, h: int, bright: tuple[int, int]) -> np.ndarray:
     return img
 
 
-@pytest.mark.parametrize(("height", "focal", "bright"), [(3.3, 300.0, (400, 300)), (8.1, 500.0, (123, 456)), (5.5, 164.0, (50, 60))])
-def test_boxes_come_back_in_frame_pixels(height: float, focal: float, bright: tuple[int, int]) -> None:
-    fake = FakeCenterNet()
+@pytest.mark.parametrize(
+    ("height", "focal", "bright", "zoom"),
+    [(3.3, 300.0, (400, 300), None), (8.1, 500.0, (123, 456), None), (5.5, 164.0, (50, 60), None),
+     (3.3, 300.0, (400, 300), "1.2"), (8.1, 500.0, (123, 456), "0.8")],
+)  # fmt: skip
+def test_boxes_come_back_in_frame_pixels(height: float, focal: float, bright: tuple[int, int], zoom: str | None) -> None:
+    """A model's ``bevflow.zoom`` metadata scales its input; boxes still map back to the frame."""
+    fake = FakeCenterNet(metadata={"bevflow.zoom": zoom} if zoom else None)
     det = Detector(session=fake, score_threshold=0.5)
     boxes = det.detect(_frame(800, 600, bright), height, focal)
-    s = scale_factor(height, focal)
+    s = scale_factor(height, focal) * float(zoom or 1)
+    assert det.scale_for(height, focal) == pytest.approx(s)
     h, w = fake.seen[0].shape[2:]
     assert h % 32 == 0 and w % 32 == 0
     assert (w, h) == (-(-round(800 * s) // 32) * 32, -(-round(600 * s) // 32) * 32)
@@ -64,6 +74,12 @@ def test_boxes_come_back_in_frame_pixels(height: float, focal: float, bright: tu
     assert abs((y0 + y1) / 2 - bright[1]) <= 1.0 / s + 0.5
     assert (x1 - x0) == pytest.approx(20.0 / s, rel=0.02)
     assert (y1 - y0) == pytest.approx(30.0 / s, rel=0.02)
+
+
+@pytest.mark.parametrize(("zoom", "message"), [("big", "'big' is not a number"), ("9", "9 is outside 0.25-4")])
+def test_a_bad_zoom_in_the_model_file_is_a_clear_error(zoom: str, message: str) -> None:
+    with pytest.raises(DetectorError, match=f"model metadata bevflow.zoom={message}"):
+        Detector(session=FakeCenterNet(metadata={"bevflow.zoom": zoom}))
 
 
 def test_fixed_size_models_get_a_letterbox() -> None:

@@ -108,3 +108,17 @@ def test_training_can_start_from_an_exported_model(tmp_path: Path) -> None:
     assert any("starting from the weights of" in line for line in lines)
     state = torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=False)["model"]
     assert float(state["stem.0.1.running_var"].min()) != 1.0  # calibrated, not the fresh model's
+
+
+def test_the_exported_file_carries_the_scale_it_was_trained_at(tmp_path: Path) -> None:
+    from bevflow.detect.runtime import Detector
+    from bevflow.training.dataset import render_dataset
+    from bevflow.training.export import export_onnx, load_checkpoint
+
+    render_dataset(tmp_path / "data", 2, seed=3, shard_size=2, zoom=1.2)
+    config = TrainConfig(steps=1, batch=2, crop=64, warmup=1, log_every=1, zoom=1.2)
+    model, zoom = load_checkpoint(train(tmp_path / "data", tmp_path / "run", config, log=lambda _m: None))
+    assert zoom == 1.2
+    detector = Detector(export_onnx(model, tmp_path / "zoomed.onnx", zoom=zoom), threads=1)
+    assert detector.zoom == 1.2
+    assert detector.scale_for(3.3, 300.0) == pytest.approx(1.2 * 40 * 1.9 / 300.0)

@@ -33,6 +33,9 @@ class FakeDetector:
         self.threads = threads
         self.calls = 0
 
+    def scale_for(self, height: float, focal: float) -> float:
+        return 40.0 * (height - 1.4) / focal
+
     def prepare(self, image: np.ndarray, scale: float):  # noqa: ANN201
         side = int(round(image.shape[0] * scale / 32)) * 32
 
@@ -50,7 +53,7 @@ def test_every_height_and_thread_count_gets_a_row(monkeypatch: pytest.MonkeyPatc
     monkeypatch.setattr(detector_bench, "frame_for", lambda h: (np.zeros((int(100 * h), int(100 * h), 3), np.uint8), 100.0 * h / 3))
     made: list[FakeDetector] = []
 
-    def make(threads: int) -> FakeDetector:
+    def make(threads: int, _height: float) -> FakeDetector:
         made.append(FakeDetector(threads))
         return made[-1]
 
