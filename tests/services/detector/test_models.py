@@ -113,8 +113,8 @@ def test_bad_height_tables_are_refused_when_the_site_is_read(table: str, message
         parse_site((SITE % "null") + f"detectors: {table}\n")
 
 
-@pytest.mark.parametrize(("height_m", "model"), [(3.3, LOW_CEILING_MODEL), (5.5, LOW_CEILING_MODEL), (6.0, DEFAULT_MODEL),
+@pytest.mark.parametrize(("height_m", "model"), [(3.3, LOW_CEILING_MODEL), (4.99, LOW_CEILING_MODEL), (5.0, DEFAULT_MODEL),
                                                  (8.1, DEFAULT_MODEL)])
-def test_the_shipped_models_split_at_six_metres(height_m: float, model: Path) -> None:
+def test_the_shipped_models_split_at_five_metres(height_m: float, model: Path) -> None:
     assert LOW_CEILING_MODEL.is_file() and DEFAULT_MODEL.is_file()
     assert DetectorBank(DEFAULT_RANGES, threads=1).for_height(height_m).model_path == model
