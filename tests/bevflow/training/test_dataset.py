@@ -84,3 +84,13 @@ def test_the_default_mix_draws_the_renders_of_before() -> None:
 def test_a_share_outside_0_to_1_is_refused(field: str) -> None:
     with pytest.raises(ValueError, match=f"SceneMix.{field} is a share"):
         SceneMix(**{field: 1.5})
+
+
+def test_a_zoomed_render_draws_the_same_scene_through_a_longer_focal_length() -> None:
+    """``zoom`` scales the camera's focal length only: a model trained on such shards sees people
+    ``zoom`` times larger (its exported file records the zoom)."""
+    plain = render_sample(np.random.default_rng([8, 0]), size=None, heights=(3.0, 3.5))
+    zoomed = render_sample(np.random.default_rng([8, 0]), size=None, heights=(3.0, 3.5), zoom=1.2)
+    assert zoomed.camera_height_m == plain.camera_height_m
+    assert zoomed.focal_px == pytest.approx(1.2 * plain.focal_px)
+    assert zoomed.image.shape[0] > 1.15 * plain.image.shape[0]  # the whole frame, 1.2 x larger

@@ -39,3 +39,12 @@ def test_a_share_outside_0_to_1_exits_2_and_writes_nothing(tmp_path: Path, capsy
     assert main(["train-detector", step, "--out", str(out), "--count", "1", option, share]) == 2
     assert f"{option} is a share, 0 to 1, got {float(share):g}" in capsys.readouterr().err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("zoom", ["0.3", "2.5"])
+def test_a_zoom_outside_half_to_twice_the_scale_exits_2_and_writes_nothing(tmp_path: Path, capsys: pytest.CaptureFixture,
+                                                                           zoom: str) -> None:
+    out = tmp_path / "shards"
+    assert main(["train-detector", "render", "--out", str(out), "--count", "1", "--zoom", zoom]) == 2
+    assert f"--zoom is a multiple of the detector's scale, 0.5 to 2, got {float(zoom):g}" in capsys.readouterr().err
+    assert not out.exists()
