@@ -148,8 +148,8 @@ class ShardSampler:
 
 class CocoSampler:
     """Random augmented batches from a user's annotated frames (``bevflow.detect.coco``). Each
-    image is brought to the detector's scale (from its ``camera_height_m`` and ``focal_px``, else
-    by ``scale``), rotated about its centre (rotated boxes turn with it; their enclosing
+    image is brought to the detector's scale times ``zoom`` (from its ``camera_height_m`` and
+    ``focal_px``, else by ``scale``), rotated about its centre (rotated boxes turn with it; their enclosing
     rectangles are the targets), flipped, equalised, and cropped."""
 
     def __init__(self, images: list[CocoImage], crop: int, rng: np.random.Generator, scale: float = 1.0,
