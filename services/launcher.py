@@ -20,10 +20,22 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 
+_ports_handed_out: set[int] = set()
+
+
 def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+    """A loopback port that nothing listens on now and that this process has not handed out before.
+
+    The kernel may give the same free port to two calls in a row, and the first caller's service
+    has usually not bound it yet, so the second would collide with it.
+    """
+    while True:
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            port = int(s.getsockname()[1])
+        if port not in _ports_handed_out:
+            _ports_handed_out.add(port)
+            return port
 
 
 @dataclass

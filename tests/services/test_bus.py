@@ -22,14 +22,9 @@ import pytest
 
 from bevflow import schemas
 from bevflow_services import bus
+from bevflow_services.launcher import free_port
 
 TIMEOUT = 5.0
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @pytest.fixture(scope="module")

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import socket
 import time
 from collections.abc import Callable, Iterator
 
@@ -17,15 +16,10 @@ from bevflow_services.gateway import GatewayState, create_app
 from bevflow_services.cli import UserError
 from bevflow_services.cli.serve import run_service
 from bevflow_services.gateway.main import bus_feed
+from bevflow_services.launcher import free_port
 from tests.services.gateway.feed import S, SITE_YAML, T0, occupancy, tracks, violation
 
 TIMEOUT_S = 10.0
-
-
-def _free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
 
 
 def _wait_for(condition: Callable[[], bool]) -> bool:
@@ -51,7 +45,7 @@ class Garbage:
 
 @pytest.fixture
 def sessions() -> Iterator[tuple[object, object]]:
-    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
     publisher_side = bus.open_session(bus.BusConfig(listen=(endpoint,)))
     gateway_side = bus.open_session(bus.BusConfig(connect=(endpoint,)))
     yield publisher_side, gateway_side

@@ -8,7 +8,6 @@ import http.cookiejar
 import json
 import re
 import shutil
-import socket
 import ssl
 import subprocess
 import sys
@@ -19,15 +18,10 @@ from pathlib import Path
 
 import pytest
 
+from bevflow_services.launcher import free_port
 from tests.services.gateway.feed import SITE_YAML
 
 TIMEOUT_S = 30.0
-
-
-def _free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
 
 
 def _certificate(folder: Path) -> tuple[Path, Path]:
@@ -63,10 +57,10 @@ def test_the_gateway_serves_https_and_logs_a_one_time_setup_link(tmp_path: Path)
     site = tmp_path / "site.yaml"
     site.write_text(SITE_YAML)
     log = tmp_path / "gateway.log"
-    port = _free_port()
+    port = free_port()
     argv = [sys.executable, "-m", "bevflow_services.gateway.main", "--site", str(site), "--port", str(port),
             "--no-view3d", "--db", str(tmp_path / "history.db"), "--tls-cert", str(cert), "--tls-key", str(key),
-            "--listen", f"tcp/127.0.0.1:{_free_port()}"]
+            "--listen", f"tcp/127.0.0.1:{free_port()}"]
     with log.open("w") as out:
         process = subprocess.Popen(argv, stdout=out, stderr=subprocess.STDOUT)
     try:

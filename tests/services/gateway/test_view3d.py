@@ -1,7 +1,6 @@
 from __future__ import annotations
 
 import math
-import socket
 import urllib.request
 from collections.abc import Iterator
 
@@ -24,13 +23,8 @@ from bevflow_services.gateway.view3d import (
     unit_cylinder,
     vertical_fov,
 )
+from bevflow_services.launcher import free_port
 from tests.services.gateway.feed import S, SITE_YAML, T0, tracks
-
-
-def _free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
 
 
 def _get(url: str) -> tuple[int, str]:
@@ -40,7 +34,7 @@ def _get(url: str) -> tuple[int, str]:
 
 @pytest.fixture
 def view(state: GatewayState) -> Iterator[View3D]:
-    view = View3D(state, port=_free_port(), rate_hz=50.0)
+    view = View3D(state, port=free_port(), rate_hz=50.0)
     view.start()
     try:
         yield view
@@ -116,7 +110,7 @@ def test_on_floor_keeps_the_segments_inside_the_floor() -> None:
 
 
 def test_the_app_starts_the_view_with_its_lifespan_and_reports_its_url(site: Site, state: GatewayState) -> None:
-    port = _free_port()
+    port = free_port()
     with TestClient(create_app(site, state, view3d_port=port)) as client:
         url = client.get("/api/config").json()["view3d_url"]
         assert url == f"http://testserver:{port}/"

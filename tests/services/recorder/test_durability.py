@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import os
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -28,6 +27,7 @@ import pytest
 from bevflow.schemas import DistanceViolation, Event, Occupancy, OverCapacity, TrackState, Tracks, ZoneOccupancy
 
 from bevflow_services import bus
+from bevflow_services.launcher import free_port
 from bevflow_services.storage import EventFilter, HistoryDatabase
 from tests.services.storage.databases import database_url  # noqa: F401  (a fixture)
 
@@ -37,12 +37,6 @@ S = 1_000_000_000
 TICK_S = 0.05
 COMMIT_S = 0.25  # the recorder's default
 START_TIMEOUT_S = 60.0
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @dataclass

@@ -15,14 +15,9 @@ from bevflow import schemas
 from bevflow_services import bus
 from bevflow_services.cli import UserError
 from bevflow_services.cli.serve import run_service
+from bevflow_services.launcher import free_port
 
 TIMEOUT = 10.0
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def serve_router_command(*args: str) -> list[str]:
