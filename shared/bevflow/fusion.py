@@ -59,6 +59,21 @@ may still be standing behind someone (``bevflow.tracking.tracker``, ``coast_need
 A sighting's covariance is its fit's plus ``weak_along_m`` along its camera's line of sight: its
 bearing is as good as any view's, its range is not.
 
+**Hidden views the occlusion test missed.** On a shallow view a box cut by a nearer person can
+escape both occlusion tests (``bevflow.cylinder``); its fit is then a strong single view placed
+metres too far along its camera's line of sight, a second estimate of a person the other
+cameras place well (on WILDTRACK 71 of the per-frame false positives). So a person seen by one
+camera only, on a ray shallower than ``hidden_view_slope`` (horizontal run per metre of the
+camera's height; 4, as ``bevflow.cylinder`` allows a head rebuild), is folded into a person of
+two or more views when that person stands nearer the camera on the same line of sight (within
+``gate_chi2`` of it under their covariances, the single view's widened by ``weak_along_m`` along
+its line of sight, as a sighting's) and that camera is not among their views: had the camera
+seen them whole it would have boxed them. The folded view counts in ``n_views`` and does not
+move the person, as a weak view. On WILDTRACK (2 % jitter, 10 % drops, seed 0) the per-frame
+false positives fall from 216 to 158 and the misses rise from 406 to 412 (MODA 0.870 → 0.881).
+Ceiling cameras look down steeper than that within their monitored radius, so the paper's case
+is untouched.
+
 ``noise=None`` is the paper's fusion: the 0.45 m rule alone, and the mean weighted by score /
 range² (range: camera centre to feet), a monocular fit's error growing with range.
 
@@ -71,6 +86,7 @@ range² (range: camera centre to feet), a monocular fit's error growing with ran
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
@@ -126,15 +142,18 @@ def fuse_cylinders(
     noise: PositionNoise | None = PositionNoise(),
     gate_chi2: float = 9.21,
     max_gate_m: float = 2.0,
+    hidden_view_slope: float = 4.0,
 ) -> Fusion:
     """Merge the cylinders of different cameras that are one person: feet closer than
     ``distance_m``, or (unless ``noise`` is None) within ``gate_chi2`` of each other given their
     position covariances and closer than ``max_gate_m``. ``cylinders.camera`` indexes ``cameras``.
     With ``noise``, rows with a finite ``cylinders.covariance`` use it and ``noise`` gives the
-    others theirs; the paper's rule (``noise=None``) uses no covariance."""
-    if not (distance_m > 0 and gate_chi2 > 0 and max_gate_m > 0):
+    others theirs; the paper's rule (``noise=None``) uses no covariance. ``hidden_view_slope``: see
+    "Hidden views the occlusion test missed" (``math.inf`` folds none; the paper's rule folds none)."""
+    if not (distance_m > 0 and gate_chi2 > 0 and max_gate_m > 0 and hidden_view_slope > 0):
         raise ValueError(
-            f"distance_m, gate_chi2 and max_gate_m must be > 0, got {distance_m}, {gate_chi2}, {max_gate_m}"
+            "distance_m, gate_chi2, max_gate_m and hidden_view_slope must be > 0, got "
+            f"{distance_m}, {gate_chi2}, {max_gate_m}, {hidden_view_slope}"
         )
     _check_cameras(cylinders, cameras)
     keep = np.flatnonzero(np.isfinite(cylinders.xy).all(axis=1))
@@ -161,7 +180,52 @@ def fuse_cylinders(
     assignment[keep[real]] = person
     weight = np.where(strong[real], 1.0, 0.0)[:, None, None] * info[real]
     fused, n_views = _merge(rows[real], person, len(order), weight, with_covariance=noise is not None)
+    if noise is not None and math.isfinite(hidden_view_slope):
+        seen_by = np.zeros((len(fused), len(cameras)), dtype=bool)
+        seen_by[person, rows.camera[real]] = True
+        into = _hidden_behind(fused, n_views, seen_by, cameras, noise.weak_along_m, gate_chi2, hidden_view_slope)
+        fused, n_views, assignment = _fold(fused, n_views, assignment, into)
     return Fusion(fused, assignment, n_views, sightings)
+
+
+def _hidden_behind(
+    fused: Cylinders, n_views: IntArray, seen_by: NDArray[np.bool_], cameras: Sequence[Camera],
+    along_m: float, gate_chi2: float, min_slope: float,
+) -> IntArray:
+    """For each fused person, the person of several views they are a missed cut view of (module
+    docstring, "Hidden views the occlusion test missed"), or −1."""
+    into = np.full(len(fused), -1, dtype=np.int64)
+    several = np.flatnonzero(n_views >= 2)
+    singles = np.flatnonzero((n_views == 1) & (fused.score > 0))
+    if not len(several) or not len(singles):
+        return into
+    centres = _camera_centres(cameras, fused.camera[singles])
+    away = fused.xy[singles] - centres[:, :2]
+    run = np.linalg.norm(away, axis=1)
+    for k in np.flatnonzero(run >= min_slope * centres[:, 2]):
+        s, camera, sight = singles[k], fused.camera[singles[k]], away[k] / run[k]
+        behind = several[~seen_by[several, camera]]
+        along = (fused.xy[behind] - centres[k, :2]) @ sight
+        offset = fused.xy[behind] - fused.xy[s]
+        covariance = fused.covariance[behind] + fused.covariance[s] + along_m**2 * np.outer(sight, sight)
+        d2 = np.einsum("ni,nij,nj->n", offset, _inverse_2x2(covariance), offset)
+        hides = (along > 0) & (along < run[k]) & (d2 < gate_chi2)
+        if hides.any():
+            into[s] = behind[hides][np.argmin(d2[hides])]
+    return into
+
+
+def _fold(fused: Cylinders, n_views: IntArray, assignment: IntArray, into: IntArray) -> tuple[Cylinders, IntArray, IntArray]:
+    """Fold each person with ``into`` ≥ 0 into that person: one more view, same position."""
+    folded = into >= 0
+    if not folded.any():
+        return fused, n_views, assignment
+    n_views = n_views.copy()
+    np.add.at(n_views, into[folded], n_views[folded])
+    target = np.where(folded, into, np.arange(len(fused)))
+    renumber = np.cumsum(~folded) - 1
+    assignment = np.where(assignment >= 0, renumber[target[np.maximum(assignment, 0)]], -1)
+    return fused[~folded], n_views[~folded], assignment
 
 
 def _sightings(weak: Cylinders, cameras: Sequence[Camera], noise: PositionNoise) -> Cylinders:

@@ -305,6 +305,44 @@ def test_a_sighting_is_uncertain_along_its_line_of_sight_only():
     assert len(fuse_cylinders(seen[1:], CROSSED).sightings) == 0
 
 
+# --- hidden views the occlusion test missed ---------------------------------------------------------
+# A person at (0, 10) seen by both CROSSED cameras, and a third side view looking along +X at
+# them from 14 m (FAR: rays shallower than 4 m of run per metre of its 2.5 m height) or from 4 m.
+FAR = [*CROSSED, side_view((-14.0, 10.0, 2.5), -90.0)]
+NEAR = [*CROSSED, side_view((-4.0, 10.0, 2.5), -90.0)]
+PERSON = ([[0.05, 10.0], [0.0, 10.05]], [0, 1])
+
+
+@pytest.mark.parametrize(
+    "cameras, xy, camera, options, folded",
+    [
+        (FAR, [[3.0, 10.0]], [2], {}, True),  # 3 m behind them on camera 2's line of sight
+        (FAR, [[3.0, 11.5]], [2], {}, False),  # 1.5 m off that line: someone else
+        (FAR, [[-3.0, 10.0]], [2], {}, False),  # in front of them: it could not be their cut box
+        (FAR, [[-0.05, 10.0], [3.0, 10.0]], [2, 2], {}, False),  # camera 2 boxed them whole: two people
+        (NEAR, [[3.0, 10.0]], [2], {}, False),  # a steep view: the occlusion tests do not miss there
+        (FAR, [[3.0, 10.0]], [2], {"hidden_view_slope": math.inf}, False),
+        (FAR, [[3.0, 10.0]], [2], PAPER, False),
+    ],
+    ids=["behind", "beside", "in front", "seen whole", "steep", "off", "paper"],
+)
+def test_a_single_view_behind_a_person_its_camera_did_not_box_is_folded_into_them(cameras, xy, camera, options, folded):
+    seen = Cylinders(xy=PERSON[0] + xy, camera=PERSON[1] + camera)
+    fusion = fuse_cylinders(seen, cameras, **options)
+    last = fusion.assignment[-1]
+    if folded:
+        assert fusion.assignment.tolist() == [0, 0, 0] and fusion.n_views.tolist() == [3]
+        np.testing.assert_allclose(fusion.fused.xy, fuse_cylinders(seen[:2], cameras).fused.xy)  # not moved
+    else:
+        assert last != fusion.assignment[0] and fusion.n_views[last] == 1
+        np.testing.assert_allclose(fusion.fused.xy[last], xy[-1])
+
+
+def test_a_single_view_is_not_folded_into_a_person_of_one_view():
+    seen = Cylinders(xy=[[0.05, 10.0], [3.0, 10.0]], camera=[0, 2])
+    assert fuse_cylinders(seen, FAR).n_views.tolist() == [1, 1]
+
+
 # --- grouping ---------------------------------------------------------------------------------------
 @pytest.mark.parametrize("n, edges, seed", [(1, 0, 0), (10, 0, 1), (10, 30, 2), (200, 150, 3), (200, 600, 4), (50, 20, 5)])
 def test_components_match_scipy(n: int, edges: int, seed: int) -> None:
