@@ -13,6 +13,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 import urllib.error
 import urllib.request
@@ -59,6 +60,7 @@ class ServiceGroup:
     log_dir: Path
     hub_port: int = field(default_factory=free_port)
     children: list[Child] = field(default_factory=list)
+    _sigterm_before: object = field(default=None, init=False, repr=False)
 
     def bus_args(self) -> list[str]:
         hub = f"tcp/127.0.0.1:{self.hub_port}"
@@ -111,10 +113,24 @@ class ServiceGroup:
                 child.process.wait()
 
     def __enter__(self) -> ServiceGroup:
+        # The children run in sessions of their own (a Ctrl-C in the terminal reaches only this
+        # process), so a SIGTERM (systemd, docker stop, timeout) must stop them from here: by
+        # default it would end this process at once and leave them running.
+        if threading.current_thread() is threading.main_thread():
+            self._sigterm_before = signal.signal(signal.SIGTERM, _exit_on_signal)
         return self
 
     def __exit__(self, *exc: object) -> None:
-        self.stop()
+        try:
+            self.stop()
+        finally:
+            if self._sigterm_before is not None:
+                signal.signal(signal.SIGTERM, self._sigterm_before)
+                self._sigterm_before = None
+
+
+def _exit_on_signal(signum: int, frame: object) -> None:
+    raise SystemExit(128 + signum)
 
 
 BOXES = ("rendered", "simulated", "recorded")

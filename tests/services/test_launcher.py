@@ -1,7 +1,12 @@
-"""Which services ``start_pipeline`` starts, in which order and with which flags (no processes)."""
+"""Which services ``start_pipeline`` starts, in which order and with which flags (no processes), and
+that a group stops its children when it is sent SIGTERM (real processes)."""
 
 from __future__ import annotations
 
+import os
+import signal
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -52,3 +57,28 @@ def test_an_unknown_box_source_is_refused(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="boxes must be one of rendered, simulated"):
         start_pipeline(FakeGroup(tmp_path), 8000, boxes="real")
 
+
+
+GROUP_UNDER_SIGTERM = """
+import subprocess, sys, time
+from pathlib import Path
+from bevflow_services.launcher import Child, ServiceGroup
+log_dir = Path(sys.argv[1])
+with ServiceGroup(site="unused", log_dir=log_dir) as group:
+    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(120)"], start_new_session=True)
+    group.children.append(Child("sleeper", child, log_dir / "sleeper.log"))
+    print(child.pid, flush=True)
+    time.sleep(120)
+"""
+
+
+def test_a_sigterm_stops_the_group_and_its_children(tmp_path: Path) -> None:
+    parent = subprocess.Popen([sys.executable, "-c", GROUP_UNDER_SIGTERM, str(tmp_path)], stdout=subprocess.PIPE, text=True)
+    try:
+        child_pid = int(parent.stdout.readline())  # type: ignore[union-attr]
+        parent.send_signal(signal.SIGTERM)
+        assert parent.wait(timeout=30) == 128 + signal.SIGTERM
+    finally:
+        parent.kill()
+    with pytest.raises(ProcessLookupError):  # stopped and reaped, not left running in its own session
+        os.kill(child_pid, 0)
