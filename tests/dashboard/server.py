@@ -11,8 +11,6 @@ from contextlib import contextmanager
 import uvicorn
 from fastapi import FastAPI
 
-from bevflow_services.launcher import free_port
-
 
 @contextmanager
 def serve(app: FastAPI, port: int = 0) -> Iterator[int]:

@@ -12,11 +12,12 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from bevflow.schemas import OverCapacity
 
 from bevflow_services.gateway import create_app
+from bevflow_services.launcher import free_port
 
 from tests.dashboard.cdp import Chromium, Page
 from tests.dashboard.conftest import DASHBOARD_DIR, LiveGateway, alert_node, open_dashboard
 from tests.dashboard.scene import Feeder, Scene
-from tests.dashboard.server import free_port, serve
+from tests.dashboard.server import serve
 
 BANNER_HIDDEN = "document.getElementById('connection-banner').hidden"
 
