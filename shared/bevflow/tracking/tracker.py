@@ -145,7 +145,9 @@ class TrackTable:
     the filter, ``height`` and ``radius`` (T,) smoothed, ``hits`` (T,) associated detections so
     far, ``misses`` (T,) consecutive updates without one, ``age_s`` (T,) time since birth,
     ``detection`` (T,) index of the input cylinder that updated the track in this update or −1,
-    ``confirmed`` (T,)."""
+    ``confirmed`` (T,), ``key`` (T,) a number of the track's own from its birth, tentative or not,
+    unique for the life of the tracker (``id`` is only given on confirmation; ``key`` follows a
+    track through it, as ``bevflow.tracking.settled`` does)."""
 
     id: IntArray
     xy: FloatArray
@@ -157,13 +159,14 @@ class TrackTable:
     age_s: FloatArray
     detection: IntArray
     confirmed: BoolArray
+    key: IntArray
 
     @classmethod
     def empty(cls) -> TrackTable:
         return cls(
             id=np.zeros(0, np.int64), xy=np.zeros((0, 2)), velocity=np.zeros((0, 2)), height=np.zeros(0),
             radius=np.zeros(0), hits=np.zeros(0, np.int64), misses=np.zeros(0, np.int64), age_s=np.zeros(0),
-            detection=np.zeros(0, np.int64), confirmed=np.zeros(0, bool),
+            detection=np.zeros(0, np.int64), confirmed=np.zeros(0, bool), key=np.zeros(0, np.int64),
         )  # fmt: skip
 
     def __len__(self) -> int:
@@ -187,6 +190,7 @@ class _Tracks:
     born_s: FloatArray = field(default_factory=lambda: np.zeros(0))
     detection: IntArray = field(default_factory=lambda: np.zeros(0, np.int64))
     confirmed: BoolArray = field(default_factory=lambda: np.zeros(0, bool))
+    key: IntArray = field(default_factory=lambda: np.zeros(0, np.int64))
 
     def __len__(self) -> int:
         return len(self.id)
@@ -204,7 +208,7 @@ class _Tracks:
             id=self.id.copy(), xy=self.state[:, :2].copy(), velocity=self.state[:, 2:].copy(),
             height=self.height.copy(), radius=self.radius.copy(), hits=self.hits.copy(),
             misses=self.misses.copy(), age_s=time_s - self.born_s, detection=self.detection.copy(),
-            confirmed=self.confirmed.copy(),
+            confirmed=self.confirmed.copy(), key=self.key.copy(),
         )
 
 
@@ -215,6 +219,7 @@ class Tracker:
         self.config = config or TrackerConfig()
         self._kalman = self.config.kalman()
         self._next_id = int(first_id)
+        self._next_key = 0
         self._tracks = _Tracks()
         self._time_s: float | None = None
 
@@ -367,6 +372,8 @@ class Tracker:
             id=np.full(n, -1, np.int64), state=state, covariance=covariance, height=cylinders.height[det].copy(),
             radius=cylinders.radius[det].copy(), hits=hits, misses=np.zeros(n, np.int64),
             born_s=np.full(n, time_s), detection=det.astype(np.int64), confirmed=np.zeros(n, bool),
+            key=self._next_key + np.arange(n, dtype=np.int64),
         )  # fmt: skip
+        self._next_key += n
         self._tracks = self._tracks.append(born)
         self._confirm()

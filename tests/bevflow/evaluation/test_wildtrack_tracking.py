@@ -66,6 +66,9 @@ def test_tracking_bridges_a_hidden_frame_and_rejects_a_one_frame_ghost(tracker, 
     missed = 0 if bridged else 1
     assert (s.tp, s.fp, s.fn, s.IDSW, s.FRAG) == (n - missed, 0, missed, 0, missed)
     assert s.MODA == pytest.approx(1.0 - missed / n) and (s.MT, s.PT, s.ML) == (3, 0, 0) and result.tracks == 3
+    # one update late, the hidden frame is bridged either way: the person was found again after it
+    late = result.settled
+    assert (late.tp, late.fp, late.fn, late.IDSW, late.FRAG) == (n, 0, 0, 0, 0) and late.APE < 0.1
 
 
 @pytest.mark.parametrize("step_m", [0.0, 0.3, 0.7, 1.0])
@@ -106,6 +109,7 @@ def test_as_dict_has_tracking_keys_on_top_and_keeps_detection_moda() -> None:
     assert {"MOTA", "IDF1", "IDSW", "MT", "ML", "FRAG", "MODA", "MODP", "APE", "method", "frames"} <= d.keys()
     assert d["MODA"] == result.detection.scores.MODA == pytest.approx(1 - 2 / 24)
     assert d["tracked_MODA"] == d["tracked"]["MODA"] == result.scores.MODA
+    assert d["settled"]["MODA"] == result.settled.MODA and {"MOTA", "IDF1", "fp", "fn"} <= d["settled"].keys()
     assert d["IDSW"] == 0 and d["tracker"]["activate_hits"] == 2 and d["seconds_per_frame_number"] == 0.1
 
 
@@ -116,6 +120,8 @@ def test_tracks_outside_the_area_count_only_when_they_match_someone() -> None:
     _, hyp = track_and_match([(ids, xy)] * 3, fused, [0.0, 0.5, 1.0], area, WILDTRACK_TRACKER)
     assert [len(h[0]) for h in hyp] == [0, 1, 1]  # confirmed from the 2nd frame; the far track never scored
     np.testing.assert_allclose(hyp[2][1], [[0.1, 0.0]], atol=1e-9)
+    _, late = track_and_match([(ids, xy)] * 3, fused, [0.0, 0.5, 1.0], area, WILDTRACK_TRACKER, settled=True)
+    assert [h[0].tolist() for h in late] == [[1], [1], [1]]  # its first frame too, under the id it got
 
 
 @pytest.mark.parametrize(
