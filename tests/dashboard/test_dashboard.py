@@ -55,11 +55,18 @@ def test_map_shows_every_person_and_the_pairs_too_close(page: Page, gateway: Liv
     assert page.evaluate("window.bevflow.violations") == len(VIOLATIONS)
     assert page.evaluate("document.getElementById('map').dataset.people") == str(people)
     # The drawing itself: a person far from the others is a light dot; one of a violating pair is red.
+    # Far from the cameras too: a camera's icon and name are drawn over the people.
     xy = gateway.scene.crowd.positions(time.time())
+    site = gateway.scene.site
+    cameras = np.array([site.camera(c).center[:2] for c in site.camera_ids])
     gaps = np.linalg.norm(xy[:, None] - xy[None], axis=2) + np.eye(len(xy)) * 1e9
-    loner = int(np.argmax(gaps.min(axis=1))) + 1
+    clear = np.minimum(gaps.min(axis=1), np.linalg.norm(xy[:, None] - cameras[None], axis=2).min(axis=1))
+    loner = int(np.argmax(clear)) + 1
+    # Two animation frames first: a layout change (a panel growing) moves the canvas at once but
+    # redraws it on the next frame, and until then the dots lie off their places.
     colours = page.evaluate(
-        f"""(() => {{
+        f"""(async () => {{
+            await new Promise((done) => requestAnimationFrame(() => requestAnimationFrame(done)));
             const canvas = document.getElementById('map');
             const box = canvas.getBoundingClientRect();
             const ratio = canvas.width / box.width;
