@@ -252,7 +252,7 @@ def format_tracking_table(results: list[TrackingEvaluation]) -> str:
                 f"{_num(s.MODA)} {_num(r.detection.scores.MODA):>8} {_num(s.precision)} {_num(s.recall)} {_num(s.APE)}"
             )
     lines.append("settled: the same tracks one update late, a new track's first frame and a missed frame "
-                 "bridged by the next one reported (history and reports can have it, live alerts cannot wait)")
+                 "bridged by the next one reported (for what is read after the fact; live alerts cannot wait)")
     return "\n".join(lines)
 
 

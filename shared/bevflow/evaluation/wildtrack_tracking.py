@@ -125,20 +125,15 @@ def evaluate_tracking(
     frames = [by_number[n] for n in detection.frame_numbers]
     if len(detection.fused) != len(frames):
         raise ValueError("the detection run kept no fused cylinders per frame; run evaluate_detection again")
-    runs = [
-        track_and_match(
-            [(f.person_ids, f.feet_xy) for f in frames],
-            detection.fused,
-            [n * seconds for n in detection.frame_numbers],
-            dataset.area,
-            tracker,
-            detection.threshold_m,
-            detection.sightings or None,
-            settled,
-        )
-        for settled in (False, True)
-    ]
-    (gt, hyp), (_, settled_hyp) = runs
+    gt, hyp, settled_hyp = track_and_match_both(
+        [(f.person_ids, f.feet_xy) for f in frames],
+        detection.fused,
+        [n * seconds for n in detection.frame_numbers],
+        dataset.area,
+        tracker,
+        detection.threshold_m,
+        detection.sightings or None,
+    )
     scores = score_tracking(gt, hyp, detection.threshold_m)
     ids = np.unique(np.concatenate([h[0] for h in hyp])) if hyp else np.zeros(0)
     return TrackingEvaluation(detection, tracker, seconds, scores, len(ids), score_tracking(gt, settled_hyp, detection.threshold_m))
@@ -159,6 +154,21 @@ def track_and_match(
     ground truth and the scored tracks ``(ids, feet)``: those inside ``area`` or matching a person
     (``scored_estimates``). ``settled``: the tracks one update late (``SettledTracks``) instead of
     the online ones."""
+    gt_out, online, late = track_and_match_both(gt, fused, times_s, area, config, threshold_m, sightings)
+    return gt_out, late if settled else online
+
+
+def track_and_match_both(
+    gt: Sequence[Frame],
+    fused: Sequence[Cylinders],
+    times_s: Sequence[float],
+    area: Area,
+    config: TrackerConfig,
+    threshold_m: float = 0.5,
+    sightings: Sequence[Cylinders] | None = None,
+) -> tuple[list[Frame], list[Frame], list[Frame]]:
+    """``track_and_match``'s ground truth, online tracks and settled tracks, from one pass of
+    the tracker."""
     if sightings is None:
         sightings = [Cylinders.empty()] * len(fused)
     if not (len(gt) == len(fused) == len(times_s) == len(sightings)):
@@ -166,20 +176,19 @@ def track_and_match(
             f"gt, fused, times_s and sightings differ in length: {len(gt)}, {len(fused)}, {len(times_s)}, {len(sightings)}"
         )
     tracker = Tracker(config)
-    reported: list[TrackTable] = []
+    online: list[TrackTable] = []
+    settled: list[TrackTable] = []
     late = SettledTracks()
     for cylinders, seen, time_s in zip(fused, sightings, times_s, strict=True):
-        table = tracker.update(cylinders, time_s, seen)
-        if not settled:
-            reported.append(table)
-        elif (frame := late.push(tracker.tracks(include_tentative=True), time_s)) is not None:
-            reported.append(frame.tracks)
-    if settled and (frame := late.flush()) is not None:
-        reported.append(frame.tracks)
-    gt_out: list[Frame] = []
-    hyp_out: list[Frame] = []
-    for (ids, feet), table in zip(gt, reported, strict=True):
-        keep = scored_estimates(area, np.asarray(feet), table.xy, threshold_m)
-        gt_out.append((np.asarray(ids, dtype=np.int64), np.asarray(feet, dtype=np.float64)))
-        hyp_out.append((table.id[keep], table.xy[keep]))
-    return gt_out, hyp_out
+        online.append(tracker.update(cylinders, time_s, seen))
+        if (frame := late.push(tracker.tracks(include_tentative=True), time_s)) is not None:
+            settled.append(frame.tracks)
+    if (frame := late.flush()) is not None:
+        settled.append(frame.tracks)
+    gt_out = [(np.asarray(ids, dtype=np.int64), np.asarray(feet, dtype=np.float64)) for ids, feet in gt]
+
+    def scored(tables: list[TrackTable]) -> list[Frame]:
+        keep = [scored_estimates(area, feet, t.xy, threshold_m) for (_, feet), t in zip(gt_out, tables, strict=True)]
+        return [(t.id[k], t.xy[k]) for t, k in zip(tables, keep, strict=True)]
+
+    return gt_out, scored(online), scored(settled)
