@@ -316,6 +316,23 @@ class DistanceViolation(EventBase):
     )
 
 
+class DistanceIncident(EventBase):
+    """People too close, grouped: everyone linked by distance violations at once is one incident
+    (``bevflow.analytics.incidents``). Published when it opens, again (same ``id``) when its people
+    change, and when it closes; ``tracks`` lists everyone involved so far."""
+
+    type: Literal["distance_incident"] = "distance_incident"
+    people: Annotated[int, Field(ge=2)] = Field(description="the most people in the group at one time")
+    current: list[int] = Field(default_factory=list, description="the tracks in the group at the latest tick")
+    min_distance_m: Annotated[float, Field(ge=0, allow_inf_nan=False)]
+    limit_m: Annotated[float, Field(gt=0, allow_inf_nan=False)]
+    position: Xy | None = Field(default=None, description="centre of the group at the latest tick")
+    last_active_ns: Annotated[int, Field(ge=0)] = Field(description="the latest tick with a violation in the group")
+    severity: Literal["low", "medium", "high"] = Field(description="from the number of people and the duration")
+    needs_acknowledgement: bool = Field(
+        default=True, description="false once an incident that ended was short: nothing to act on any more")
+
+
 class OverCapacity(EventBase):
     type: Literal["over_capacity"] = "over_capacity"
     capacity: Annotated[int, Field(ge=0)]
@@ -336,11 +353,12 @@ class CameraHealthEvent(EventBase):
 
 
 Event = Annotated[
-    DistanceViolation | OverCapacity | CalibrationDrift | CameraHealthEvent,
+    DistanceViolation | DistanceIncident | OverCapacity | CalibrationDrift | CameraHealthEvent,
     Field(discriminator="type"),
 ]
 EVENT_ADAPTER: TypeAdapter[Event] = TypeAdapter(Event)
-EVENT_TYPES: tuple[str, ...] = ("distance_violation", "over_capacity", "calibration_drift", "camera_down", "camera_up")
+EVENT_TYPES: tuple[str, ...] = (
+    "distance_violation", "distance_incident", "over_capacity", "calibration_drift", "camera_down", "camera_up")
 
 
 def decode_event(payload: bytes | str) -> Event:
@@ -363,7 +381,7 @@ class AlertMessage(Message):
     """
 
     id: str
-    type: Literal["distance_violation", "over_capacity", "calibration_drift", "camera_down", "camera_up"]
+    type: Literal["distance_violation", "distance_incident", "over_capacity", "calibration_drift", "camera_down", "camera_up"]
     zone: str | None = None
     tracks: list[int] = Field(default_factory=list)
     start: str = Field(description="when the condition began, ISO-8601 UTC")

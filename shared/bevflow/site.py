@@ -160,6 +160,12 @@ class Thresholds(_Strict):
             "close, as in a queue, are not grouped by this rule; null disables"
         ),
     )
+    incident_min_duration_s: Annotated[float, Field(ge=0)] = Field(
+        default=10.0, description="a group of people too close becomes an incident once it has lasted this long")
+    incident_quiet_s: Annotated[float, Field(ge=0)] = Field(
+        default=15.0, description="an incident closes after this long without anyone in it too close")
+    incident_ack_min_s: Annotated[float, Field(ge=0)] = Field(
+        default=30.0, description="an incident that ended shorter than this (and small) needs no acknowledgement")
     site_capacity: Annotated[int, Field(ge=0)] | None = None
     capacity_hysteresis: Annotated[int, Field(ge=0)] = 2
     track_activate_hits: Annotated[int, Field(ge=1)] = 3

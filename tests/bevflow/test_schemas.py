@@ -21,6 +21,7 @@ from bevflow.schemas import (
     CameraHealthEvent,
     CylinderEstimate,
     Detections2D,
+    DistanceIncident,
     DistanceViolation,
     FrameHeader,
     Occupancy,
@@ -138,6 +139,11 @@ EVENTS = [
     pytest.param(
         DistanceViolation(id="dv-1", start_ns=10, tracks=[3, 4], min_distance_m=1.2, limit_m=2.0, position=(1.0, 2.0)),
         id="distance",
+    ),
+    pytest.param(
+        DistanceIncident(id="di-1", start_ns=10, tracks=[3, 4, 5], people=3, current=[3, 4], min_distance_m=0.9,
+                         limit_m=2.0, position=(1.0, 2.0), last_active_ns=15, severity="medium"),
+        id="incident",
     ),
     pytest.param(OverCapacity(id="oc-1", start_ns=10, end_ns=20, zone="bar", capacity=10, peak=13), id="over-capacity"),
     pytest.param(

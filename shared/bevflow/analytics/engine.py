@@ -1,7 +1,7 @@
 """Every analytic of a site behind one call per tick, for the tracker service.
 
 ``SiteAnalytics.update`` checks the tick's positions, finds each person's zones once, and hands
-them to the distance monitor, the occupancy counter, the crowded-interval trackers and the
+them to the distance monitor (whose pair violations the incident tracker groups), the occupancy counter, the crowded-interval trackers and the
 trajectory history. Crowded intervals are tracked for each zone with a crowded level
 (``Zone.effective_crowded_level``) and for the site as a whole when it has a capacity, at 80 % of
 it (the same default a zone uses).
@@ -17,22 +17,23 @@ from numpy.typing import ArrayLike
 
 from bevflow.analytics.contacts import contacts
 from bevflow.analytics.distance import DistanceMonitor
+from bevflow.analytics.incidents import IncidentTracker
 from bevflow.analytics.intervals import CrowdedIntervalTracker
 from bevflow.analytics.occupancy import OccupancyCounter
 from bevflow.analytics.positions import IntArray, check_positions, seconds_to_ns
 from bevflow.analytics.trajectories import TrackHistory, Trajectory
 from bevflow.analytics.zones import BoolArray, ZoneIndex, zone_lists, zones_by_track
-from bevflow.schemas import Contact, CrowdedInterval, DistanceViolation, Occupancy, OverCapacity
+from bevflow.schemas import Contact, CrowdedInterval, DistanceIncident, DistanceViolation, Occupancy, OverCapacity
 from bevflow.site import Site
 
 
 @dataclass(frozen=True, eq=False)
 class AnalyticsTick:
     """What one tick produced. ``events`` are ready to publish as they are: distance events (ends,
-    then starts), then capacity events."""
+    then starts), the distance incidents they make up, then capacity events."""
 
     occupancy: Occupancy
-    events: list[DistanceViolation | OverCapacity]
+    events: list[DistanceViolation | DistanceIncident | OverCapacity]
     violations: IntArray  # (K, 2) track-id pairs with an open distance violation, smaller id first
     ids: IntArray  # (N,) the tick's track ids, the rows of ``inside``
     inside: BoolArray  # (N, Z) person n stands in zone z
@@ -73,6 +74,7 @@ class SiteAnalytics:
         th = site.thresholds
         self.zones = ZoneIndex(site.zones)
         self.distance = DistanceMonitor(th, site.zones, release_margin_m=release_margin_m)
+        self.incidents = IncidentTracker(th, site.zones)
         self.occupancy = OccupancyCounter(site.site, site.zones, th)
         gap, shortest = seconds_to_ns(crowded_gap_s), seconds_to_ns(crowded_min_duration_s)
         self.crowding: list[tuple[int, CrowdedIntervalTracker]] = []  # (zone column or -1 for the site, tracker)
@@ -97,7 +99,8 @@ class SiteAnalytics:
         ids_arr, xy_arr = check_positions(ids, xy)
         inside = self.zones.contains(xy_arr)
         distance_events = self.distance.update(time_ns, ids_arr, xy_arr, velocity)
-        events: list[DistanceViolation | OverCapacity] = list(distance_events)
+        events: list[DistanceViolation | DistanceIncident | OverCapacity] = list(distance_events)
+        events += self.incidents.update(time_ns, self.distance.current_pairs, ids_arr, xy_arr)
         occupancy, capacity_events = self.occupancy.update(time_ns, ids_arr, xy_arr, inside=inside)
         events += capacity_events
         zone_counts = [z.count for z in occupancy.zones]

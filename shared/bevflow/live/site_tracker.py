@@ -15,7 +15,7 @@ import numpy as np
 from bevflow.analytics.engine import AnalyticsTick, SiteAnalytics
 from bevflow.detections import Cylinders
 from bevflow.fusion import Fusion, fuse_cylinders
-from bevflow.schemas import DistanceViolation, Occupancy, OverCapacity, Tracks
+from bevflow.schemas import DistanceIncident, DistanceViolation, Occupancy, OverCapacity, Tracks
 from bevflow.site import Site
 from bevflow.tracking.tracker import Tracker, TrackerConfig, TrackTable
 
@@ -27,7 +27,7 @@ class SiteStep:
 
     tracks_json: bytes
     occupancy: Occupancy
-    events: list[DistanceViolation | OverCapacity]
+    events: list[DistanceViolation | DistanceIncident | OverCapacity]
     fusion: Fusion
     table: TrackTable
     analytics: AnalyticsTick
