@@ -359,6 +359,9 @@ Event = Annotated[
 EVENT_ADAPTER: TypeAdapter[Event] = TypeAdapter(Event)
 EVENT_TYPES: tuple[str, ...] = (
     "distance_violation", "distance_incident", "over_capacity", "calibration_drift", "camera_down", "camera_up")
+# What an alert feed gets unless it asks by type: the pair events are the raw material of the
+# incidents (one per pair of people), kept for integrations that ask for them.
+FEED_EVENT_TYPES: tuple[str, ...] = tuple(t for t in EVENT_TYPES if t != "distance_violation")
 
 
 def decode_event(payload: bytes | str) -> Event:

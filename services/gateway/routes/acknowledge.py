@@ -2,6 +2,8 @@
 
 - ``POST /api/alerts/{id}/acknowledge`` (operator) ``{"note": "..."}``: records it, and sends it to
   every dashboard on ``/ws/acknowledgements``;
+- ``POST /api/alerts/acknowledge`` (operator) ``{"ids": [...], "note": "..."}``: the same for
+  several alerts at once (unknown ids are listed, not fatal);
 - ``GET /api/acknowledgements?ids=a,b``: the acknowledgements of those alerts (or the latest ones);
 - alert listings (``/api/alerts``, ``/api/violations``) carry each alert's acknowledgements.
 
@@ -42,6 +44,15 @@ class AcknowledgementView(BaseModel):
 
 class AcknowledgeBody(BaseModel):
     note: str = Field("", max_length=1000)
+
+
+class BulkAcknowledgeBody(AcknowledgeBody):
+    ids: list[Annotated[str, Field(min_length=1, max_length=200)]] = Field(min_length=1, max_length=MAX_IDS)
+
+
+class BulkAcknowledged(BaseModel):
+    acknowledged: list[AcknowledgementView]
+    unknown: list[str] = Field(description="ids the gateway knows no alert for; nothing recorded for them")
 
 
 def view(ack: Acknowledgement) -> AcknowledgementView:
@@ -132,6 +143,19 @@ def acknowledge(alert_id: AlertId, principal: Operator, conn: HTTPConnection, bo
     except KeyError:
         raise HTTPException(404, f"alert_id: no alert {alert_id!r} (see /api/alerts)") from None
     return view(ack)
+
+
+@router.post("/alerts/acknowledge", response_model=BulkAcknowledged, status_code=201,
+             summary="Acknowledge several alerts at once (operator)")
+def acknowledge_many(body: BulkAcknowledgeBody, principal: Operator, conn: HTTPConnection) -> BulkAcknowledged:
+    book = get_book(conn)
+    done, unknown = [], []
+    for alert_id in dict.fromkeys(body.ids):
+        try:
+            done.append(view(book.acknowledge(alert_id, principal.name, body.note)))
+        except KeyError:
+            unknown.append(alert_id)
+    return BulkAcknowledged(acknowledged=done, unknown=unknown)
 
 
 @router.get("/acknowledgements", response_model=list[AcknowledgementView], summary="Who acknowledged which alert")

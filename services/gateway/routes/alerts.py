@@ -1,4 +1,10 @@
-"""``/api/violations`` and ``/api/alerts``: distance violations and every other alert, past and active."""
+"""``/api/alerts``, ``/api/incidents`` and ``/api/violations``: alerts past and active.
+
+``/api/alerts`` lists what a supervisor acts on: distance incidents (people too close, grouped),
+over capacity, camera and calibration alerts. The per-pair ``distance_violation`` events behind
+the incidents are listed only when asked for by type (``?types=distance_violation``) and by
+``/api/violations``.
+"""
 
 from __future__ import annotations
 
@@ -8,7 +14,7 @@ from fastapi import APIRouter, Query
 from pydantic import Field
 from starlette.requests import HTTPConnection
 
-from bevflow.schemas import EVENT_TYPES, AlertMessage
+from bevflow.schemas import EVENT_TYPES, FEED_EVENT_TYPES, AlertMessage
 
 from bevflow_services.gateway.history import EventQuery
 from bevflow_services.gateway.params import (
@@ -28,7 +34,9 @@ router = APIRouter(prefix="/api", tags=["alerts"])
 
 TrackParam = Annotated[int | None, Query(ge=0, description="only alerts that involve this track id")]
 ActiveParam = Annotated[bool | None, Query(description="true: only ongoing alerts; false: only ended ones")]
-TypesParam = Annotated[str | None, Query(description=f"comma-separated alert types: {', '.join(EVENT_TYPES)}")]
+TypesParam = Annotated[str | None, Query(
+    description=f"comma-separated alert types: {', '.join(EVENT_TYPES)}; default: all but distance_violation "
+    "(the per-pair events grouped into distance_incident)")]
 
 
 def event_query(site, window, types: frozenset[str] | None, zone: str | None, track: int | None,
@@ -83,5 +91,25 @@ def alerts(
     offset: Offset = 0,
 ) -> Page[AlertItem]:
     """The same objects ``/ws/alerts`` sends, for filling an alert feed when a page opens."""
-    query = event_query(site, window, split_csv(types, "types", EVENT_TYPES), zone, track, active)
+    wanted = split_csv(types, "types", EVENT_TYPES) or frozenset(FEED_EVENT_TYPES)
+    query = event_query(site, window, wanted, zone, track, active)
+    return _page(state, conn, query, limit, offset)
+
+
+@router.get("/incidents", response_model=Page[AlertItem], summary="Distance incidents, newest first")
+def incidents(
+    state: StateDep,
+    conn: HTTPConnection,
+    site: SiteDep,
+    window: TimeRangeDep,
+    zone: ZoneParam = None,
+    track: TrackParam = None,
+    active: ActiveParam = None,
+    limit: Limit = 100,
+    offset: Offset = 0,
+) -> Page[AlertItem]:
+    """Groups of people too close for longer than the site's ``incident_min_duration_s``: one
+    incident per group, whoever joins or leaves, closed after ``incident_quiet_s`` without a
+    violation. ``event.people`` is the largest the group was; ``event.current`` who is in it now."""
+    query = event_query(site, window, frozenset({"distance_incident"}), zone, track, active)
     return _page(state, conn, query, limit, offset)

@@ -1,9 +1,11 @@
 """Websockets: ``/ws/alerts`` (alerts as they start and end) and ``/ws/tracks`` (every tracker tick).
 
-``/ws/alerts?types=distance_violation,over_capacity&zones=gate&replay=active`` sends one
+``/ws/alerts?types=distance_incident,over_capacity&zones=gate&replay=active`` sends one
 ``AlertMessage`` JSON object per text frame: an alert when it starts and the same ``id`` again when
-it ends (``active`` false, ``end`` set). ``types`` and ``zones`` are comma-separated filters (omit
-one to get everything; an alert with zone null only passes when ``zones`` is omitted);
+it changes or ends (``active`` false, ``end`` set). ``types`` and ``zones`` are comma-separated
+filters (omit ``types`` to get every type but ``distance_violation``, the per-pair events that
+``distance_incident`` groups; omit ``zones`` for every zone; an alert with zone null only passes
+when ``zones`` is omitted);
 ``replay=active`` first sends the alerts already ongoing. ``/ws/tracks`` sends one ``Tracks`` JSON
 object per tick, starting with the latest one.
 
@@ -25,7 +27,7 @@ from fastapi import APIRouter, HTTPException, WebSocket, WebSocketDisconnect
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel
 
-from bevflow.schemas import EVENT_TYPES, AlertMessage, Tracks
+from bevflow.schemas import EVENT_TYPES, FEED_EVENT_TYPES, AlertMessage, Tracks
 
 from bevflow_services.gateway.auth import get_access
 from bevflow_services.gateway.fanout import Subscription, pump
@@ -56,7 +58,7 @@ def alert_filter(query: Any, state: GatewayState) -> tuple[AlertFilter, bool]:
     unknown = sorted(set(query.keys()) - {"types", "zones", "replay", "token"})
     if unknown:
         raise HTTPException(400, f"unknown parameter(s) {', '.join(unknown)}; allowed: types, zones, replay")
-    types = split_csv(query.get("types"), "types", EVENT_TYPES)
+    types = split_csv(query.get("types"), "types", EVENT_TYPES) or frozenset(FEED_EVENT_TYPES)
     zones = split_csv(query.get("zones"), "zones", tuple(z.id for z in state.site.zones))
     replay = query.get("replay", "none")
     if replay not in REPLAY_CHOICES:

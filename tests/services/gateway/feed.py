@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from bevflow.schemas import DistanceViolation, Occupancy, OverCapacity, TrackState, Tracks, ZoneOccupancy
+from bevflow.schemas import DistanceIncident, DistanceViolation, Occupancy, OverCapacity, TrackState, Tracks, ZoneOccupancy
 
 T0 = 1_700_000_000_000_000_000  # capture times start here (2023-11-14T22:13:20Z)
 S = 1_000_000_000
@@ -68,3 +68,9 @@ def violation(event_id: str, start_ns: int, pair=(1, 2), zone: str | None = "gat
 
 def over_capacity(event_id: str, start_ns: int, zone: str | None = "gate", end_ns: int | None = None) -> OverCapacity:
     return OverCapacity(id=event_id, start_ns=start_ns, end_ns=end_ns, zone=zone, capacity=3, peak=5)
+
+
+def incident(event_id: str, start_ns: int, people=(1, 2, 3), zone: str | None = "gate", end_ns: int | None = None) -> DistanceIncident:
+    return DistanceIncident(id=event_id, start_ns=start_ns, end_ns=end_ns, zone=zone, tracks=list(people), people=len(people),
+                            current=[] if end_ns else list(people), min_distance_m=0.9, limit_m=2.0, position=(1.0, 1.0),
+                            last_active_ns=end_ns or start_ns, severity="medium")

@@ -48,7 +48,8 @@ def test_an_operator_acknowledges_and_every_listing_shows_who_and_when(site: Sit
         assert client.post("/api/alerts/oc-2/acknowledge", headers=bearer(secure.tokens["admin"])).status_code == 201
 
         viewer = bearer(secure.tokens["viewer"])
-        items = {a["id"]: a for a in client.get("/api/alerts", headers=viewer).json()["items"]}
+        listing = client.get("/api/alerts?types=distance_violation,over_capacity", headers=viewer).json()
+        items = {a["id"]: a for a in listing["items"]}
         assert [(a["user"], a["note"]) for a in items["oc-2"]["acknowledgements"]] == [("operator", "sent staff"), ("admin", "")]
         assert items["dv-1"]["acknowledgements"] == []
         assert client.get("/api/violations", headers=viewer).json()["items"][0]["acknowledgements"] == []
@@ -91,3 +92,15 @@ def test_database_acknowledgements_outlive_the_gateway(site: Site, database_url:
             client.post("/api/alerts/oc-9/acknowledge", headers=bearer(secure.tokens["operator"]))
     with HistoryDatabase.open(database_url) as reopened:
         assert [(a.event_id, a.user) for a in reopened.acknowledgements()] == [("oc-9", "operator")]
+
+
+def test_an_operator_acknowledges_several_alerts_at_once(site: Site, history_state: GatewayState) -> None:
+    with secured_client(site, history_state) as (client, secure):
+        body = {"ids": ["oc-2", "nope", "dv-1", "oc-2"], "note": "all seen"}
+        assert client.post("/api/alerts/acknowledge", json=body, headers=bearer(secure.tokens["viewer"])).status_code == 403
+        made = client.post("/api/alerts/acknowledge", json=body, headers=bearer(secure.tokens["operator"]))
+        assert made.status_code == 201
+        assert [(a["alert_id"], a["note"]) for a in made.json()["acknowledged"]] == [("oc-2", "all seen"), ("dv-1", "all seen")]
+        assert made.json()["unknown"] == ["nope"]
+        listed = client.get("/api/acknowledgements?ids=dv-1,oc-2", headers=bearer(secure.tokens["viewer"])).json()
+        assert [a["alert_id"] for a in listed] == ["dv-1", "oc-2"]

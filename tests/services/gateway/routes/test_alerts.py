@@ -6,7 +6,7 @@ from fastapi.testclient import TestClient
 from bevflow.schemas import CameraHealthEvent
 
 from bevflow_services.gateway.state import GatewayState
-from tests.services.gateway.feed import S, T0, over_capacity, violation
+from tests.services.gateway.feed import S, T0, incident, over_capacity, violation
 
 
 def _feed(state: GatewayState) -> None:
@@ -16,6 +16,9 @@ def _feed(state: GatewayState) -> None:
     state.apply(over_capacity("c1", T0 + 20 * S, zone="gate"))
     state.apply(CameraHealthEvent(id="d1", type="camera_down", camera="north", start_ns=T0 + 30 * S))
     state.apply(violation("v3", T0 + 40 * S, pair=(1, 5), zone=None))
+    state.apply(incident("i1", T0 + 2 * S, people=(1, 2, 6), zone="gate"))
+    state.apply(incident("i1", T0 + 2 * S, people=(1, 2, 6), zone="gate", end_ns=T0 + 25 * S))
+    state.apply(incident("i2", T0 + 41 * S, people=(1, 5), zone=None))
 
 
 def test_violations_are_alert_messages_newest_first(client: TestClient, state: GatewayState) -> None:
@@ -49,12 +52,26 @@ def test_violation_filters(client: TestClient, state: GatewayState, query: str, 
 @pytest.mark.parametrize(
     ("query", "ids"),
     [
-        ("", ["v3", "d1", "c1", "v2", "v1"]),
+        ("", ["i2", "d1", "c1", "i1"]),  # the pair events behind the incidents only when asked for
+        ("types=distance_violation", ["v3", "v2", "v1"]),
         ("types=over_capacity,camera_down", ["d1", "c1"]),
         ("types=camera_down&active=true", ["d1"]),
-        ("zone=gate", ["c1", "v1"]),
+        ("zone=gate", ["c1", "i1"]),
     ],
 )
 def test_alerts_of_every_type(client: TestClient, state: GatewayState, query: str, ids: list[str]) -> None:
     _feed(state)
     assert [a["id"] for a in client.get(f"/api/alerts?{query}").json()["items"]] == ids
+
+
+@pytest.mark.parametrize(
+    ("query", "ids"),
+    [("", ["i2", "i1"]), ("active=true", ["i2"]), ("track=6", ["i1"]), ("zone=gate", ["i1"])],
+)
+def test_incidents(client: TestClient, state: GatewayState, query: str, ids: list[str]) -> None:
+    _feed(state)
+    body = client.get(f"/api/incidents?{query}").json()
+    assert [a["id"] for a in body["items"]] == ids
+    i1 = next((a for a in body["items"] if a["id"] == "i1"), None)
+    if i1 is not None:
+        assert (i1["type"], i1["tracks"], i1["event"]["people"], i1["active"]) == ("distance_incident", [1, 2, 6], 3, False)

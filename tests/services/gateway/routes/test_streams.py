@@ -18,7 +18,7 @@ from bevflow.schemas import AlertMessage, CameraHealthEvent, Tracks
 from bevflow.site import Site
 
 from bevflow_services.gateway import GatewayState, create_app
-from tests.services.gateway.feed import S, T0, over_capacity, tracks, violation
+from tests.services.gateway.feed import S, T0, incident, over_capacity, tracks, violation
 from tests.services.gateway.live import serve_in_thread
 
 TIMEOUT_S = 10.0
@@ -44,6 +44,7 @@ def _receive_until(ws: ClientConnection, last_id: str) -> list[dict]:
 def _mixed_alerts() -> list:
     return [
         violation("v-gate", T0, zone="gate"),
+        incident("i-gate", T0, zone="gate"),
         violation("v-shop", T0 + S, zone="shop"),
         violation("v-site", T0 + 2 * S, zone=None),
         over_capacity("c-gate", T0 + 3 * S, zone="gate"),
@@ -55,14 +56,16 @@ def _mixed_alerts() -> list:
 
 END_V = violation("end", T0 + 9 * S, zone="gate")
 END_C = over_capacity("end", T0 + 9 * S, zone="gate")
+END_I = incident("end", T0 + 9 * S, zone="gate")
 
 
 @pytest.mark.parametrize(
     ("query", "last", "expected"),
     [
-        ("", END_C, ["v-gate", "v-shop", "v-site", "c-gate", "c-site", "down", "v-gate", "end"]),
+        ("", END_C, ["i-gate", "c-gate", "c-site", "down", "end"]),  # pair events only when asked for
         ("?types=distance_violation", END_V, ["v-gate", "v-shop", "v-site", "v-gate", "end"]),
-        ("?zones=gate", END_C, ["v-gate", "c-gate", "v-gate", "end"]),
+        ("?zones=gate", END_C, ["i-gate", "c-gate", "end"]),
+        ("?types=distance_incident", END_I, ["i-gate", "end"]),
         ("?types=distance_violation,over_capacity&zones=gate", END_C, ["v-gate", "c-gate", "v-gate", "end"]),
         ("?types=over_capacity&zones=gate,shop", END_C, ["c-gate", "end"]),
     ],
@@ -77,7 +80,7 @@ def test_alert_subscribers_receive_only_what_their_filters_match(server: str, st
 
 
 def test_an_alert_carries_type_zone_start_and_tracks(server: str, state: GatewayState) -> None:
-    with _open(server, "/ws/alerts") as ws:
+    with _open(server, "/ws/alerts?types=distance_violation") as ws:
         state.apply(violation("v1", T0 + 250_000_000, pair=(3, 8), zone="gate"))
         alert = json.loads(ws.recv(timeout=TIMEOUT_S))
     assert (alert["type"], alert["zone"], alert["start"], alert["tracks"], alert["active"]) == (
@@ -90,7 +93,7 @@ def test_replay_sends_the_active_alerts_first(server: str, state: GatewayState) 
     state.apply(violation("old", T0, zone="gate", end_ns=T0 + S))  # ended: not replayed
     state.apply(violation("ongoing-gate", T0 + 2 * S, zone="gate"))
     state.apply(violation("ongoing-shop", T0 + 3 * S, zone="shop"))
-    with _open(server, "/ws/alerts?zones=gate&replay=active") as ws:
+    with _open(server, "/ws/alerts?types=distance_violation,over_capacity&zones=gate&replay=active") as ws:
         state.apply(over_capacity("end", T0 + 4 * S, zone="gate"))
         received = _receive_until(ws, "end")
     assert [a["id"] for a in received] == ["ongoing-gate", "end"]
@@ -99,7 +102,7 @@ def test_replay_sends_the_active_alerts_first(server: str, state: GatewayState) 
 @pytest.mark.parametrize(
     ("path", "detail"),
     [
-        ("/ws/alerts?types=fire", "types: unknown value(s) fire; allowed: distance_violation, over_capacity"),
+        ("/ws/alerts?types=fire", "types: unknown value(s) fire; allowed: distance_violation, distance_incident, over_capacity"),
         ("/ws/alerts?zones=gate,roof", "zones: unknown value(s) roof; allowed: gate, shop"),
         ("/ws/alerts?replay=all", "replay: must be one of none, active, got 'all'"),
         ("/ws/alerts?zone=gate", "unknown parameter(s) zone; allowed: types, zones, replay"),
@@ -128,7 +131,8 @@ def test_a_client_that_stops_reading_does_not_hold_up_the_others(server: str, st
     """The stuck client's socket fills up; its queue then drops the oldest alerts while the
     reading client keeps receiving every alert, in order."""
     n, batch = 2000, 50
-    with _raw_websocket(server, "/ws/alerts") as stuck, _open(server, "/ws/alerts") as reader:
+    path = "/ws/alerts?types=distance_violation"
+    with _raw_websocket(server, path) as stuck, _open(server, path) as reader:
         got = []
         for start in range(0, n, batch):
             for k in range(start, start + batch):
