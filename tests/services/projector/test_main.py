@@ -8,7 +8,7 @@ from bevflow.fusion import position_covariance
 from bevflow.schemas import Detections2D
 from bevflow.site import parse_site
 
-from bevflow_services.projector.main import Projector, fit_reach_m
+from bevflow_services.projector.main import Projector
 
 SITE = """
 site: hall
@@ -97,11 +97,3 @@ def test_fitting_only_near_the_reporting_radius_keeps_exactly_what_a_full_fit_ke
         anchor = camera.pixels_to_plane(box_anchor(camera, message.to_boxes()), 0.0)[:, :2]
         assert (np.linalg.norm(anchor[kept], axis=1) > reporting).any()
         assert 0 < len(result.cylinders) < 50
-
-
-@pytest.mark.parametrize(
-    ("height", "radius", "reach"),
-    [(4.0, None, None), (1.7, 10.0, None), (2.4, 10.0, None), (4.0, 3.0, 6.5), (5.5, 8.5, 8.5 * 5.5 / 3.5 + 0.5)],
-)
-def test_fit_reach_is_where_a_kept_persons_box_can_land(height, radius, reach) -> None:
-    assert fit_reach_m(height, radius) == (None if reach is None else pytest.approx(reach))
