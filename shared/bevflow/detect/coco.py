@@ -28,6 +28,7 @@ class CocoImage:
     rotated: FloatArray  # (N, 5)
     camera_height_m: float | None = None
     focal_px: float | None = None
+    oriented: bool = False  # whether the file gave angles ([cx, cy, w, h, deg] boxes)
 
     @property
     def xyxy(self) -> FloatArray:
@@ -52,20 +53,25 @@ def read_coco(annotations: Path, images_dir: Path | None = None) -> list[CocoIma
     person = {c["id"] for c in cats if str(c.get("name", "")).lower() == "person"} or ({c["id"] for c in cats} if len(cats) == 1 else None)
     folder = Path(images_dir) if images_dir is not None else Path(annotations).parent
     boxes: dict[object, list[list[float]]] = {im["id"]: [] for im in doc["images"]}
+    oriented = False
     for ann in doc["annotations"]:
         if person is not None and ann.get("category_id") not in person:
             continue
         b = [float(v) for v in ann["bbox"]]
         if len(b) == 4:
             b = [b[0] + b[2] / 2, b[1] + b[3] / 2, b[2], b[3], 0.0]
-        elif len(b) != 5:
+        elif len(b) == 5:
+            oriented = True
+        else:
             raise CocoError(f"annotation {ann.get('id')}: bbox needs 4 or 5 numbers, got {len(b)}")
         if ann["image_id"] not in boxes:
             raise CocoError(f"annotation {ann.get('id')} refers to unknown image {ann['image_id']}")
         boxes[ann["image_id"]].append(b)
+    # A file of rotated boxes is oriented as a whole, so an image whose people all happen to lie
+    # at 0° is scored as rotated like the rest.
     return [
         CocoImage(folder / im["file_name"], np.array(boxes[im["id"]], dtype=np.float64).reshape(-1, 5),
-                  im.get("camera_height_m"), im.get("focal_px"))
+                  im.get("camera_height_m"), im.get("focal_px"), oriented)
         for im in doc["images"]
     ]  # fmt: skip
 
