@@ -184,44 +184,8 @@ def _export(args: argparse.Namespace) -> int:
     return 0
 
 
-# --- `bevflow evaluate --detector --images DIR --annotations FILE` ---------------------------------
-def add_detector_arguments(parser: argparse.ArgumentParser) -> None:
-    """The options of ``bevflow evaluate`` that score the person detector on annotated frames."""
-    group = parser.add_argument_group("detector evaluation (--detector --images DIR --annotations FILE)")
-    group.add_argument("--detector", action="store_true", help="run the real person detector on images instead of using annotated boxes")
-    group.add_argument("--model", type=Path, metavar="PATH", help="the ONNX detector (default: the shipped model)")
-    group.add_argument("--annotations", type=Path, metavar="FILE", help="COCO JSON of the --images: bbox [x,y,w,h] or rotated [cx,cy,w,h,deg]")
-    group.add_argument("--threads", type=int, default=2, metavar="N", help="ONNX Runtime threads (default 2)")
-    group.add_argument("--camera-height", type=float, metavar="M", help="camera height for images without 'camera_height_m' (with --focal)")
-    group.add_argument("--focal", type=float, metavar="PX", help="focal length in px for images without 'focal_px' (with --camera-height)")
-    group.add_argument("--scale", type=float, default=1.0, metavar="F", help="resize factor when neither the images nor --camera-height/--focal give one (default 1)")
+# `bevflow evaluate --detector --images DIR --annotations FILE` lives in its own module; these
+# names stay importable from here for ``bevflow_services.cli.evaluate``.
+from bevflow_services.cli.detector_evaluation import add_detector_arguments, run_detector_evaluation  # noqa: E402
 
-
-def run_detector_evaluation(args: argparse.Namespace) -> int:
-    from bevflow.detect.coco import CocoError
-    from bevflow.detect.runtime import Detector, DetectorError
-    from bevflow.evaluation.detector import evaluate_detector
-
-    if not args.detector:
-        raise UserError("--images is for scoring the person detector: add --detector (and --annotations FILE)")
-    if args.annotations is None:
-        raise UserError("--detector --images DIR needs --annotations FILE (COCO JSON)")
-    if not args.images.is_dir():
-        raise UserError(f"--images {args.images} is not a folder")
-    if (args.camera_height is None) != (args.focal is None):
-        raise UserError("give --camera-height and --focal together")
-    try:
-        # Score every detection: AP needs the whole precision-recall curve.
-        detector = Detector(args.model, threads=_count(args.threads, "--threads"), score_threshold=0.05)
-        scores = evaluate_detector(detector, args.annotations, args.images, args.camera_height, args.focal, args.scale)
-    except (DetectorError, CocoError, FileNotFoundError) as exc:
-        raise UserError(str(exc)) from None
-    result = scores.as_dict()
-    print(f"{result['images']} images, {result['annotations']} people, {result['detections']} detections")
-    print(f"AP50 {scores.AP50:.3f}  precision {scores.precision:.3f}  recall {scores.recall:.3f}  F1 {scores.F1:.3f}  (score >= {scores.threshold:.3f})")
-    if args.json is not None:
-        try:
-            args.json.write_text(json.dumps(result, indent=2) + "\n")
-        except OSError as exc:
-            raise UserError(f"cannot write {args.json}: {exc.strerror or exc}") from None
-    return 0
+__all__ = ["add_detector_arguments", "register", "run_detector_evaluation"]

@@ -5,8 +5,12 @@ Matching follows COCO/VOC: in each image, detections are taken best score first 
 matched to the unmatched ground-truth box it overlaps most, if their IoU is at least 0.5; the
 rest are false positives. AP is the area under the precision–recall curve with precision made
 monotone (all-point interpolation, as VOC since 2010 and COCO do). Rotated ground-truth boxes
-count as their enclosing axis-aligned rectangles (``bevflow.detect.coco``), as the detector's
-boxes are axis-aligned.
+count as their enclosing axis-aligned rectangles (``bevflow.detect.coco``) for AP50.
+
+``AP50_rotated`` scores as CEPDOF, WEPDTOF and RAPiD do: IoU between rotated boxes
+(``bevflow.detect.rotated``), truth as annotated. A detection without an angle is turned to its
+radial angle about the image circle's centre, sized so that its enclosing box is the detection.
+For annotation files without angles both sides stay axis-aligned and it equals AP50.
 
 >>> gt = [np.array([[0.0, 0.0, 10.0, 10.0]])]
 >>> s = score_boxes([np.array([[1.0, 0.0, 10.0, 10.0], [50.0, 50.0, 60.0, 60.0]])], [np.array([0.9, 0.3])], gt)
@@ -16,15 +20,18 @@ boxes are axis-aligned.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from bevflow.detect.coco import CocoImage, read_coco
+from bevflow.detect.circle import AssumedCalibration, assume_calibration
+from bevflow.detect.coco import CocoImage, read_coco, rotated_to_xyxy
+from bevflow.detect.rotated import radial_boxes, rotated_iou_matrix
 from bevflow.detections import Boxes
 
 FloatArray = NDArray[np.float64]
@@ -32,10 +39,13 @@ FloatArray = NDArray[np.float64]
 
 @dataclass(frozen=True)
 class DetectorScores:
-    """AP50 over all scores; precision, recall and F1 at ``threshold`` (the best-F1 score cut);
-    counts of images, annotations (ground-truth boxes) and detections."""
+    """AP50 over all scores, between axis-aligned boxes and between rotated ones
+    (``AP50_rotated``); precision, recall and F1 at ``threshold`` (the best-F1 score cut, axis-
+    aligned); counts of images, annotations (ground-truth boxes) and detections; the detector's
+    mean time per frame when it was timed."""
 
     AP50: float
+    AP50_rotated: float
     precision: float
     recall: float
     F1: float
@@ -43,6 +53,7 @@ class DetectorScores:
     images: int
     annotations: int
     detections: int
+    ms_per_frame: float | None = None
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -58,14 +69,15 @@ def iou_matrix(a: FloatArray, b: FloatArray) -> FloatArray:
     return inter / np.maximum(area(a)[:, None] + area(b)[None, :] - inter, 1e-12)
 
 
-def match_image(xyxy: FloatArray, scores: FloatArray, truth: FloatArray, iou_threshold: float = 0.5) -> NDArray[np.bool_]:
-    """Whether each detection (in the given order) is a true positive, greedy by score."""
+def match_by_iou(iou: FloatArray, scores: FloatArray, iou_threshold: float = 0.5) -> NDArray[np.bool_]:
+    """Whether each detection (row of ``iou``, in the given order) is a true positive: greedy by
+    score, each to the free ground-truth box (column) it overlaps most."""
     order = np.argsort(-np.asarray(scores), kind="stable")
     tp = np.zeros(len(order), dtype=bool)
-    if not len(truth) or not len(order):
+    if not iou.size:
         return tp
-    iou = iou_matrix(np.asarray(xyxy)[order], truth)
-    free = np.ones(len(truth), dtype=bool)
+    iou = iou[order]
+    free = np.ones(iou.shape[1], dtype=bool)
     for k in range(len(order)):
         cand = np.where(free, iou[k], -1.0)
         j = int(cand.argmax())
@@ -75,22 +87,27 @@ def match_image(xyxy: FloatArray, scores: FloatArray, truth: FloatArray, iou_thr
     return tp
 
 
-def score_boxes(
-    detections: Sequence[FloatArray], scores: Sequence[FloatArray], truth: Sequence[FloatArray], iou_threshold: float = 0.5
-) -> DetectorScores:
-    """Score per-image detections (xyxy, scores) against per-image ground truth (xyxy)."""
-    if not (len(detections) == len(scores) == len(truth)):
-        raise ValueError("detections, scores and truth need one entry per image")
-    all_scores, all_tp = [], []
-    for d, s, t in zip(detections, scores, truth, strict=True):
-        all_tp.append(match_image(d, s, np.asarray(t, np.float64).reshape(-1, 4), iou_threshold))
-        all_scores.append(np.asarray(s, np.float64).reshape(-1))
-    s = np.concatenate(all_scores) if all_scores else np.zeros(0)
-    tp = np.concatenate(all_tp) if all_tp else np.zeros(0, bool)
-    n_truth = int(sum(len(np.asarray(t).reshape(-1, 4)) for t in truth))
+def match_image(xyxy: FloatArray, scores: FloatArray, truth: FloatArray, iou_threshold: float = 0.5) -> NDArray[np.bool_]:
+    """Whether each detection (in the given order) is a true positive, greedy by score."""
+    return match_by_iou(iou_matrix(xyxy, truth), scores, iou_threshold)
+
+
+@dataclass(frozen=True)
+class _Curve:
+    AP: float
+    precision: float
+    recall: float
+    F1: float
+    threshold: float
+
+
+def _curve(tp: list[NDArray[np.bool_]], scores: Sequence[FloatArray], n_truth: int) -> _Curve:
+    """AP (all-point interpolation) and the best-F1 operating point of pooled per-image matches."""
+    s = np.concatenate([np.asarray(x, np.float64).reshape(-1) for x in scores]) if len(scores) else np.zeros(0)
+    hit = np.concatenate(tp) if tp else np.zeros(0, bool)
     order = np.argsort(-s, kind="stable")
-    s, tp = s[order], tp[order]
-    ctp, cfp = np.cumsum(tp), np.cumsum(~tp)
+    s, hit = s[order], hit[order]
+    ctp, cfp = np.cumsum(hit), np.cumsum(~hit)
     recall = ctp / max(n_truth, 1)
     precision = ctp / np.maximum(ctp + cfp, 1)
     # Cut only between different scores: detections with equal scores stand or fall together.
@@ -103,15 +120,154 @@ def score_boxes(
         p, r, f, thr = 0.0, 0.0, 0.0, 1.0
     envelope = np.maximum.accumulate(np.r_[precision, 0.0][::-1])[::-1]
     ap = float(np.sum(np.diff(np.r_[0.0, recall]) * envelope[:-1][: len(recall)])) if n_truth else 0.0
-    return DetectorScores(AP50=ap, precision=p, recall=r, F1=f, threshold=thr, images=len(truth), annotations=n_truth, detections=len(s))
+    return _Curve(ap, p, r, f, thr)
+
+
+def score_boxes(
+    detections: Sequence[FloatArray],
+    scores: Sequence[FloatArray],
+    truth: Sequence[FloatArray],
+    iou_threshold: float = 0.5,
+    rotated_detections: Sequence[FloatArray] | None = None,
+    rotated_truth: Sequence[FloatArray] | None = None,
+) -> DetectorScores:
+    """Score per-image detections (xyxy, scores) against per-image ground truth (xyxy). With
+    ``rotated_detections`` and ``rotated_truth`` ((N, 5) per image, ``bevflow.detect.rotated``)
+    ``AP50_rotated`` matches those instead; without them it is the axis-aligned AP50."""
+    if not (len(detections) == len(scores) == len(truth)):
+        raise ValueError("detections, scores and truth need one entry per image")
+    truth = [np.asarray(t, np.float64).reshape(-1, 4) for t in truth]
+    n_truth = int(sum(len(t) for t in truth))
+    aligned = _curve([match_image(d, s, t, iou_threshold) for d, s, t in zip(detections, scores, truth, strict=True)], scores, n_truth)
+    rotated_ap = aligned.AP
+    if rotated_detections is not None and rotated_truth is not None:
+        if not (len(rotated_detections) == len(rotated_truth) == len(scores)):
+            raise ValueError("rotated detections and truth need one entry per image")
+        hits = [match_by_iou(rotated_iou_matrix(d, t), s, iou_threshold) for d, s, t in zip(rotated_detections, scores, rotated_truth, strict=True)]
+        rotated_ap = _curve(hits, scores, n_truth).AP
+    n_det = int(sum(np.asarray(s).size for s in scores))
+    return DetectorScores(AP50=aligned.AP, AP50_rotated=rotated_ap, precision=aligned.precision, recall=aligned.recall,
+                          F1=aligned.F1, threshold=aligned.threshold, images=len(truth), annotations=n_truth, detections=n_det)  # fmt: skip
 
 
 class ImageDetector:
-    """What ``evaluate_detector`` needs (``bevflow.detect.runtime.Detector`` is one)."""
+    """What ``evaluate_detector`` needs (``bevflow.detect.runtime.Detector`` is one). A detector
+    that knows each box's angle also has ``detect_rotated(image, camera_height_m, focal_px,
+    centre) -> (rotated (N, 5), confidence (N,))``; the others' boxes are turned to their radial
+    angle about the image circle's centre for ``AP50_rotated``."""
 
     def detect(self, image_bgr: NDArray[np.uint8], camera_height_m: float, focal_px: float) -> Boxes: ...
 
     def detect_scaled(self, image_bgr: NDArray[np.uint8], scale: float = 1.0) -> Boxes: ...
+
+
+@dataclass(frozen=True)
+class FrameSetup:
+    """How one frame is fed to the detector: its camera height and focal length (from the
+    annotations, the caller, or assumed: ``assumed`` then says what), or a plain ``scale``; and
+    the centre its people lie radially about."""
+
+    centre: tuple[float, float]
+    camera_height_m: float | None = None
+    focal_px: float | None = None
+    scale: float | None = None
+    assumed: AssumedCalibration | None = None
+
+
+def frame_setup(entry: CocoImage, image: NDArray[np.uint8], camera_height_m: float | None, focal_px: float | None,
+                scale: float | None) -> FrameSetup:  # fmt: skip
+    """The image's own keys first, then the caller's height and focal length, then the caller's
+    ``scale``; with none of them, what ``bevflow.detect.circle`` assumes of the frame."""
+    h = entry.camera_height_m if entry.camera_height_m is not None else camera_height_m
+    f = entry.focal_px if entry.focal_px is not None else focal_px
+    centre = ((image.shape[1] - 1) / 2, (image.shape[0] - 1) / 2)
+    if h is not None and f is not None:
+        return FrameSetup(centre, h, f)
+    if scale is not None:
+        return FrameSetup(centre, scale=scale)
+    assumed = assume_calibration(image)
+    return FrameSetup((assumed.circle.cx, assumed.circle.cy), assumed.camera_height_m, assumed.focal_px, assumed=assumed)
+
+
+def run_on_frame(detector: ImageDetector, image: NDArray[np.uint8], setup: FrameSetup) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """(xyxy (N, 4), rotated (N, 5), confidence (N,)) of one frame."""
+    if setup.scale is None and hasattr(detector, "detect_rotated"):
+        rotated, conf = detector.detect_rotated(image, setup.camera_height_m, setup.focal_px, setup.centre)
+        return rotated_to_xyxy(rotated), np.asarray(rotated, np.float64).reshape(-1, 5), np.asarray(conf, np.float64)
+    if setup.scale is None:
+        boxes = detector.detect(image, setup.camera_height_m, setup.focal_px)
+    else:
+        boxes = detector.detect_scaled(image, setup.scale)
+    return boxes.xyxy, radial_boxes(boxes.xyxy, setup.centre), boxes.confidence
+
+
+@dataclass(frozen=True)
+class FrameResult:
+    """One frame's detections and truth, kept for scoring and drawing."""
+
+    entry: CocoImage
+    setup: FrameSetup
+    xyxy: FloatArray
+    rotated: FloatArray
+    confidence: FloatArray
+
+    @property
+    def truth_rotated(self) -> FloatArray:
+        """The truth as rotated boxes: as annotated, or (axis-aligned files) the boxes at 0°,
+        compared with the detections' enclosing boxes so ``AP50_rotated`` equals AP50."""
+        return self.entry.rotated if self.entry.oriented else _upright(self.entry.xyxy)
+
+    @property
+    def detections_rotated(self) -> FloatArray:
+        return self.rotated if self.entry.oriented else _upright(self.xyxy)
+
+
+def _upright(xyxy: FloatArray) -> FloatArray:
+    x = np.asarray(xyxy, np.float64).reshape(-1, 4)
+    return np.column_stack([(x[:, 0] + x[:, 2]) / 2, (x[:, 1] + x[:, 3]) / 2, x[:, 2] - x[:, 0], x[:, 3] - x[:, 1], np.zeros(len(x))])
+
+
+def detect_frames(
+    detector: ImageDetector,
+    annotations: Path,
+    images_dir: Path | None = None,
+    camera_height_m: float | None = None,
+    focal_px: float | None = None,
+    scale: float | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    log: Callable[[str], None] | None = None,
+) -> tuple[list[FrameResult], float]:
+    """Run ``detector`` on every image of a COCO file (set up by ``frame_setup``); also returns
+    the mean milliseconds of the detector per frame. ``log`` hears what was assumed of frames
+    without calibration. Raises FileNotFoundError / ValueError for unreadable input."""
+    results, seconds = [], 0.0
+    entries = read_coco(annotations, images_dir)
+    for k, entry in enumerate(entries):
+        image = read_image(entry.path)
+        setup = frame_setup(entry, image, camera_height_m, focal_px, scale)
+        if setup.assumed is not None and log is not None:
+            log(f"{entry.path.name}: no calibration given; assumed {setup.assumed.describe()}")
+        start = time.perf_counter()
+        xyxy, rotated, conf = run_on_frame(detector, image, setup)
+        seconds += time.perf_counter() - start
+        results.append(FrameResult(entry, setup, xyxy, rotated, conf))
+        if progress is not None:
+            progress(k + 1, len(entries))
+    return results, 1000.0 * seconds / max(len(entries), 1)
+
+
+def read_image(path: Path) -> NDArray[np.uint8]:
+    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if image is None:
+        raise FileNotFoundError(f"cannot read image {path}")
+    return image
+
+
+def score_frames(results: Sequence[FrameResult], ms_per_frame: float | None = None) -> DetectorScores:
+    scores = score_boxes([r.xyxy for r in results], [r.confidence for r in results], [r.entry.xyxy for r in results],
+                         rotated_detections=[r.detections_rotated for r in results],
+                         rotated_truth=[r.truth_rotated for r in results])  # fmt: skip
+    return replace(scores, ms_per_frame=ms_per_frame)
 
 
 def evaluate_detector(
@@ -120,24 +276,13 @@ def evaluate_detector(
     images_dir: Path | None = None,
     camera_height_m: float | None = None,
     focal_px: float | None = None,
-    scale: float = 1.0,
+    scale: float | None = None,
     progress: Callable[[int, int], None] | None = None,
+    log: Callable[[str], None] | None = None,
 ) -> DetectorScores:
     """Run ``detector`` on every image of a COCO file and score it. Each image is scaled from its
     own ``camera_height_m`` / ``focal_px`` (COCO image keys) when present, else from the ones given
-    here, else resized by ``scale``. Raises FileNotFoundError / ValueError for unreadable input."""
-    entries: list[CocoImage] = read_coco(annotations, images_dir)
-    dets, scores, truth = [], [], []
-    for k, entry in enumerate(entries):
-        image = cv2.imread(str(entry.path), cv2.IMREAD_COLOR)
-        if image is None:
-            raise FileNotFoundError(f"cannot read image {entry.path}")
-        h = entry.camera_height_m if entry.camera_height_m is not None else camera_height_m
-        f = entry.focal_px if entry.focal_px is not None else focal_px
-        boxes = detector.detect(image, h, f) if h is not None and f is not None else detector.detect_scaled(image, scale)
-        dets.append(boxes.xyxy)
-        scores.append(boxes.confidence)
-        truth.append(entry.xyxy)
-        if progress is not None:
-            progress(k + 1, len(entries))
-    return score_boxes(dets, scores, truth)
+    here, else resized by ``scale``, else from what its image circle suggests (``log`` hears what
+    was assumed). Raises FileNotFoundError / ValueError for unreadable input."""
+    results, ms = detect_frames(detector, annotations, images_dir, camera_height_m, focal_px, scale, progress, log)
+    return score_frames(results, ms)

@@ -83,7 +83,9 @@ def test_evaluate_detector_reads_images_and_scaling_keys(tmp_path: Path) -> None
     oracle = _Oracle({(40, 50): truth[0], (30, 60): truth[1]})
     s = evaluate_detector(oracle, tmp_path / "ann.json", scale=0.5)
     assert s.AP50 == pytest.approx(1.0) and s.annotations == 3 and s.images == 2
+    assert s.AP50_rotated == s.AP50  # axis-aligned annotations: the same boxes at 0°
     assert oracle.calls == [("detect", 3.3, 200.0), ("scaled", 0.5)]
+    assert s.ms_per_frame is not None and s.ms_per_frame >= 0
 
 
 def test_evaluate_detector_reports_missing_images(tmp_path: Path) -> None:

@@ -1,0 +1,57 @@
+"""``bevflow evaluate --detector --images DIR --annotations FILE``: what it prints and writes, and
+the options it refuses. Tiny synthetic frames through the shipped model (fast)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from bevflow_services.cli import main
+
+
+def _frames(tmp_path: Path) -> tuple[Path, Path]:
+    images = tmp_path / "images"
+    images.mkdir()
+    frame = np.zeros((320, 320, 3), np.uint8)
+    cv2.circle(frame, (160, 160), 150, (110, 120, 130), -1)
+    cv2.imwrite(str(images / "a.jpg"), frame)
+    doc = {"images": [{"id": 1, "file_name": "a.jpg"}], "categories": [{"id": 1, "name": "person"}],
+           "annotations": [{"id": 1, "image_id": 1, "category_id": 1, "bbox": [160, 250, 30, 60, 0]}]}
+    (tmp_path / "ann.json").write_text(json.dumps(doc))
+    return images, tmp_path / "ann.json"
+
+
+def test_scores_draws_and_says_what_it_assumed(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    images, ann = _frames(tmp_path)
+    args = ["evaluate", "--detector", "--images", str(images), "--annotations", str(ann), "--draw", str(tmp_path / "drawn"),
+            "--json", str(tmp_path / "out.json")]  # fmt: skip
+    assert main(args) == 0
+    out = capsys.readouterr().out
+    assert "a.jpg: no calibration given; assumed image circle centre (160, 160), radius 150 px" in out
+    assert "190° equidistant lens; camera 3 m above the floor" in out
+    assert "AP50_rotated" in out and "ms per frame" in out
+    result = json.loads((tmp_path / "out.json").read_text())
+    assert {"AP50", "AP50_rotated", "precision", "recall", "F1", "ms_per_frame"} <= set(result)
+    assert cv2.imread(str(tmp_path / "drawn" / "a.jpg")).shape == (320, 320, 3)
+
+
+def test_given_calibration_is_used_and_nothing_is_assumed(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    images, ann = _frames(tmp_path)
+    assert main(["evaluate", "--detector", "--images", str(images), "--annotations", str(ann), "--camera-height", "3.3", "--focal", "95"]) == 0
+    assert "assumed" not in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [(["--camera-height", "3"], "give --camera-height and --focal together"),
+     (["--scale", "0"], "--scale must be a number > 0, got 0.0"),
+     (["--threads", "0"], "--threads must be positive, got 0")],
+)
+def test_bad_options_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture, extra: list[str], message: str) -> None:
+    images, ann = _frames(tmp_path)
+    assert main(["evaluate", "--detector", "--images", str(images), "--annotations", str(ann), *extra]) == 2
+    assert message in capsys.readouterr().err
