@@ -1,0 +1,109 @@
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bevflow.datasets.mot import RecordingError, read_detections, read_truth
+
+CAMERAS = {"a": (100, 50), "b": (100, 50)}
+
+
+def write(folder: Path, files: dict[str, str]) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    for name, text in files.items():
+        (folder / name).write_text(text)
+    return folder
+
+
+def test_boxes_by_camera_and_frame_with_confidence(tmp_path: Path) -> None:
+    folder = write(tmp_path / "d", {
+        "a.txt": "1,-1,10,5,20,30,0.9,-1,-1,-1\n1,-1,40,5,10,10,0.3,-1,-1,-1\n\n3,-1,0,0,5,5,1.0\n",
+        "b.txt": "2,-1,1.5,2.5,3,4,0.75\n",
+        "c.txt": "not a camera of the site: not read\n",
+    })
+    rec = read_detections(folder, CAMERAS)
+    assert rec.camera_ids == ("a", "b") and rec.frame_numbers == (1, 2, 3)
+    a, b = rec.cameras
+    np.testing.assert_array_equal(a.boxes(1).xyxy, [[10, 5, 30, 35], [40, 5, 50, 15]])
+    np.testing.assert_array_equal(a.boxes(1).confidence, [0.9, 0.3])
+    np.testing.assert_array_equal(b.boxes(2).xyxy, [[1.5, 2.5, 4.5, 6.5]])
+    assert len(a.boxes(2)) == 0 and len(b.boxes(7)) == 0
+
+
+@pytest.mark.parametrize(
+    ("row", "expected"),
+    [
+        ("1,-1,-10,-5,30,20,0.9", [[0, 0, 20, 15]]),  # cut at the top-left corner
+        ("1,-1,90,40,30,20,0.9", [[90, 40, 100, 50]]),  # cut at the bottom-right corner
+        ("1,-1,120,10,30,20,0.9", None),  # wholly off the image: dropped
+    ],
+)
+def test_boxes_are_clipped_to_the_image_as_a_detectors_are(tmp_path: Path, row: str, expected) -> None:
+    folder = write(tmp_path / "d", {"a.txt": row + "\n", "b.txt": ""})
+    boxes = read_detections(folder, CAMERAS).cameras[0].boxes(1)
+    if expected is None:
+        assert len(boxes) == 0
+    else:
+        np.testing.assert_array_equal(boxes.xyxy, expected)
+
+
+@pytest.mark.parametrize(
+    ("row", "message"),
+    [
+        ("1,-1,10,5,20", r"a\.txt:2: expected at least 7 comma-separated values, got 5"),
+        ("1,-1,10,5,20,x,0.9", r"a\.txt:2: 'x' is not a number"),
+        ("1,-1,10,5,20,nan,0.9", r"a\.txt:2: 'nan' is not a finite number"),
+        ("1.5,-1,10,5,20,30,0.9", r"a\.txt:2: the frame number must be a whole number"),
+        ("-1,-1,10,5,20,30,0.9", r"a\.txt:2: frame numbers start at 0"),
+        ("1,-1,10,5,0,30,0.9", r"a\.txt:2: a box needs width and height above 0"),
+    ],
+)
+def test_a_bad_detection_row_names_file_and_line(tmp_path: Path, row: str, message: str) -> None:
+    folder = write(tmp_path / "d", {"a.txt": "1,-1,10,5,20,30,0.9\n" + row + "\n", "b.txt": ""})
+    with pytest.raises(RecordingError, match=message):
+        read_detections(folder, CAMERAS)
+
+
+def test_a_missing_camera_file_names_the_camera(tmp_path: Path) -> None:
+    folder = write(tmp_path / "d", {"a.txt": ""})
+    with pytest.raises(RecordingError, match=r"b\.txt: no detections file for camera 'b'"):
+        read_detections(folder, CAMERAS)
+
+
+def test_a_missing_folder_is_an_error(tmp_path: Path) -> None:
+    with pytest.raises(RecordingError, match="no such folder"):
+        read_detections(tmp_path / "nowhere", CAMERAS)
+
+
+def test_truth_by_frame(tmp_path: Path) -> None:
+    path = tmp_path / "truth.txt"
+    path.write_text("1,7,2.0,0.5\n1,8,3.0,1.5\n3,7,2.1,0.5\n")
+    truth = read_truth(path)
+    assert truth.frame_numbers == (1, 3)
+    ids, xy = truth.at(1)
+    assert ids.tolist() == [7, 8] and xy.tolist() == [[2.0, 0.5], [3.0, 1.5]]
+    ids, xy = truth.at(2)
+    assert ids.shape == (0,) and xy.shape == (0, 2)
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("1,7,2.0\n", r"truth\.txt:1: expected at least 4"),
+        ("1,7,2.0,0.5\n1,7,2.0,0.6\n", r"truth\.txt:2: person 7 appears twice in frame 1"),
+        ("1,7.5,2.0,0.5\n", r"truth\.txt:1: the person id must be a whole number"),
+        ("1,7,inf,0.5\n", r"truth\.txt:1: 'inf' is not a finite number"),
+    ],
+)
+def test_bad_truth_names_file_and_line(tmp_path: Path, text: str, message: str) -> None:
+    path = tmp_path / "truth.txt"
+    path.write_text(text)
+    with pytest.raises(RecordingError, match=message):
+        read_truth(path)
+
+
+def test_missing_truth_file(tmp_path: Path) -> None:
+    with pytest.raises(RecordingError, match="no such file"):
+        read_truth(tmp_path / "truth.txt")
