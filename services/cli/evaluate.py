@@ -38,6 +38,8 @@ from bevflow.evaluation.detection import DetectionEvaluation, evaluate_detection
 from bevflow.evaluation.wildtrack_tracking import TrackingEvaluation, evaluate_tracking
 from bevflow.sim.noise import DetectorNoise
 from bevflow_services.cli import UserError
+from bevflow_services.cli.evaluate_replay import EXAMPLE as REPLAY_EXAMPLE
+from bevflow_services.cli.evaluate_replay import add_replay_arguments, run_replay
 from bevflow_services.cli.train_detector import add_detector_arguments, run_detector_evaluation
 
 DATASETS = ("wildtrack",)
@@ -50,6 +52,7 @@ examples:
   bevflow evaluate --dataset wildtrack --root /data/Wildtrack --frames 0:50     (the first 50 annotated frames)
   bevflow evaluate --suite paper --json suite.json     (the paper's Tables 2 and 3 on simulated sequences; add --frames-scale 0.03 for a quick run)
   bevflow evaluate --suite paper --detector --frames-scale 0.05     (the same on rendered frames through the shipped detector)
+""" + REPLAY_EXAMPLE + """
 
 --frames takes a Python slice over the annotated frames sorted by frame number, not frame numbers:
   0:50 = the first 50, 150: = from the 151st to the end, ::2 = every other one,
@@ -72,6 +75,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     source.add_argument("--dataset", choices=DATASETS, help="a public dataset read from --root")
     source.add_argument("--suite", metavar="NAME", help="a built-in simulated suite: 'paper' runs every Table 1 sequence, camera set and projection method (--method does not apply) and prints the paper's Tables 2 and 3")
     source.add_argument("--images", type=Path, metavar="DIR", help="with --detector: a folder of frames annotated by --annotations (COCO JSON); reports AP50, precision, recall, F1")
+    source.add_argument("--detections", type=Path, metavar="DIR", help="a recording of any detector's boxes, one DIR/<camera id>.txt per camera of --site, replayed through the live pipeline and tracked; reports MOTA, IDF1, HOTA, ... against --truth")
     parser.add_argument("--frames-scale", type=float, metavar="F", help="--suite only: shorten every sequence to F x its frames, e.g. 0.1 for a quick run (default 1)")
     parser.add_argument("--jobs", type=int, metavar="N", help="--suite only: sequences simulated in parallel (default: one per CPU core)")
     parser.add_argument("--root", type=Path, metavar="DIR", help="the dataset folder (for WILDTRACK: the one holding calibrations/ and annotations_positions/)")
@@ -86,12 +90,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--fusion-distance", type=float, default=0.45, metavar="M", help="merge cylinders of different cameras closer than M metres (default 0.45, the paper's)")
     parser.add_argument("--json", type=Path, metavar="OUT", help="also write the results to this JSON file")
     add_detector_arguments(parser)
+    add_replay_arguments(parser)
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     if args.images is not None:
         return run_detector_evaluation(args)
+    if args.detections is not None:
+        replayed = run_replay(args)
+        if args.json is not None:
+            _write_json(args.json, replayed.as_dict())
+        return 0
     methods = list(METHODS) if args.method == "all" else [args.method]
     if args.suite is not None:
         return _run_suite(args, methods)

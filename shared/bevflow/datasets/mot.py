@@ -31,6 +31,10 @@ from bevflow.detections import Boxes
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
+MIN_CONFIDENCE = 0.5
+"""Boxes below this confidence are left out unless asked for: the usual operating point of a
+COCO person detector such as Faster R-CNN, whose boxes below it are mostly not people."""
+
 
 class RecordingError(ValueError):
     """A detections folder or truth file that cannot be read; the message names file and line."""
@@ -43,8 +47,10 @@ class CameraRecording:
     camera_id: str
     by_frame: dict[int, Boxes]
 
-    def boxes(self, frame: int) -> Boxes:
-        return self.by_frame.get(frame) or Boxes.empty()
+    def boxes(self, frame: int, min_confidence: float = 0.0) -> Boxes:
+        """The boxes of ``frame`` whose confidence reaches ``min_confidence``."""
+        boxes = self.by_frame.get(frame) or Boxes.empty()
+        return boxes if min_confidence <= 0 else boxes[boxes.confidence >= min_confidence]
 
 
 @dataclass(frozen=True)

@@ -30,6 +30,8 @@ def test_boxes_by_camera_and_frame_with_confidence(tmp_path: Path) -> None:
     np.testing.assert_array_equal(a.boxes(1).confidence, [0.9, 0.3])
     np.testing.assert_array_equal(b.boxes(2).xyxy, [[1.5, 2.5, 4.5, 6.5]])
     assert len(a.boxes(2)) == 0 and len(b.boxes(7)) == 0
+    np.testing.assert_array_equal(a.boxes(1, min_confidence=0.5).confidence, [0.9])
+    assert len(b.boxes(2, min_confidence=0.75)) == 1 and len(b.boxes(2, min_confidence=0.8)) == 0
 
 
 @pytest.mark.parametrize(

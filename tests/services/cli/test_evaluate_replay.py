@@ -1,0 +1,76 @@
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from bevflow.evaluation.replay import HEADLINE
+from bevflow_services.cli import main
+from tests.bevflow.evaluation.test_replay import replay, write_recording
+from tests.bevflow.evaluation.test_wildtrack_tracking import walkers
+
+
+@pytest.fixture
+def recording(tmp_path: Path) -> Path:
+    write_recording(walkers(0.7), tmp_path)
+    return tmp_path
+
+
+def args(folder: Path, *extra: str) -> list[str]:
+    return ["evaluate", "--detections", str(folder / "detections"), "--site", str(folder / "site.json"),
+            "--truth", str(folder / "truth.txt"), "--fps", "2", *extra]
+
+
+def test_replay_prints_and_writes_the_scores_and_the_tracks(recording: Path, capsys: pytest.CaptureFixture) -> None:
+    out, tracks = recording / "scores.json", recording / "tracks.txt"
+    assert main(args(recording, "--json", str(out), "--tracks-out", str(tracks))) == 0
+    result = json.loads(out.read_text())
+    expected = replay(recording, min_confidence=0.5)
+    assert {k: result[k] for k in HEADLINE} == pytest.approx(expected.headline())
+    assert result["frames"] == 8 and result["min_confidence"] == 0.5
+    rows = [line.split(",") for line in tracks.read_text().splitlines()]
+    assert len(rows) == sum(len(t) for _, t in expected.tracks) > 0
+    assert {int(r[0]) for r in rows} <= set(range(8)) and all(len(r) == 4 for r in rows)
+    printed = capsys.readouterr().out
+    assert "HOTA" in printed and "settled" in printed and "confidence >= 0.5" in printed
+
+
+def test_the_area_leaves_out_unmatched_tracks_beyond_it(recording: Path, tmp_path: Path) -> None:
+    # the walkers stand at y = -2, 0, 2 m: an area around the first one scores only them
+    out = tmp_path / "area.json"
+    assert main(args(recording, "--area=-5,-3,10,-1", "--json", str(out))) == 0
+    result = json.loads(out.read_text())
+    assert result["tracked"]["n_gt"] == 3 * 8 and result["tracked"]["fp"] == 0
+
+
+@pytest.mark.parametrize(
+    ("change", "extra", "message"),
+    [
+        (None, ("--fps", "0"), "--fps must be a number of frames per second > 0"),
+        (None, ("--area", "1,2,3"), "--area must be four numbers"),
+        (None, ("--area", "3,0,1,2"), "--area needs XMAX > XMIN"),
+        (None, ("--min-confidence", "-1"), "--min-confidence must be a number >= 0"),
+        ("missing camera", (), "CVLab2.txt: no detections file for camera 'CVLab2'"),
+        ("bad row", (), "CVLab1.txt:3: 'wide' is not a number"),
+        ("bad truth", (), "truth.txt:1: expected at least 4"),
+    ],
+)
+def test_bad_input_is_one_clear_message(recording: Path, capsys: pytest.CaptureFixture, change, extra, message) -> None:
+    if change == "missing camera":
+        (recording / "detections" / "CVLab2.txt").unlink()
+    elif change == "bad row":
+        path = recording / "detections" / "CVLab1.txt"
+        lines = path.read_text().splitlines()
+        lines[2] = "2,-1,10,10,wide,30,0.9"
+        path.write_text("\n".join(lines))
+    elif change == "bad truth":
+        (recording / "truth.txt").write_text("0,1,2\n")
+    assert main(args(recording, *extra)) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_replay_needs_site_truth_and_fps(recording: Path, capsys: pytest.CaptureFixture) -> None:
+    assert main(["evaluate", "--detections", str(recording / "detections"), "--fps", "2"]) == 2
+    assert "--detections needs --site" in capsys.readouterr().err
