@@ -3,6 +3,7 @@
     bevflow serve ingest --site site.yaml                 # cameras with a `source` in the site file
     bevflow serve ingest --site demo-hall --simulate      # the simulator's boxes (no detector)
     bevflow serve ingest --site demo-hall --simulate --render   # rendered frames, for the detector
+    bevflow serve ingest --site site.yaml --detections DIR --fps 4   # a recording of boxes (no detector)
 
 Real cameras: each camera's ``source`` (RTSP/HTTP URL, video file or image folder) is read on
 its own thread and its newest frame published with its capture time and sequence number; a
@@ -16,6 +17,9 @@ the scene's frame number), for the detector service to find the people in. Witho
 camera reports the boxes of the people it sees, through the detector-noise model, straight onto
 the detections key (the stage a detector would fill). If the machine cannot keep up, late frames
 are skipped at the source and counted, never queued.
+
+Recorded boxes (``--detections``, ``bevflow_services.ingest.replay``): a detector's boxes from
+files, one per camera, published in real time as the cameras' detections.
 """
 
 from __future__ import annotations
@@ -24,7 +28,9 @@ import argparse
 import logging
 import time
 from collections.abc import Iterator
+from pathlib import Path
 
+from bevflow.datasets.mot import MIN_CONFIDENCE
 from bevflow.schemas import Detections2D, FrameHeader, SimulatedTruth
 from bevflow.sim.feed import LIVE_NOISE, SimulatedFeed, scene_for_site
 from bevflow.sim.noise import DetectorNoise
@@ -37,6 +43,7 @@ from bevflow.site import Site
 from bevflow_services import bus
 from bevflow_services.cli import UserError
 from bevflow_services.cli.serve import service_site, stop_on_signals
+from bevflow_services.ingest import replay
 from bevflow_services.ingest.sources import LatestFrameReader
 
 log = logging.getLogger(__name__)
@@ -60,6 +67,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        help="simulation with --render: frames per second each camera publishes (default: the "
                        "scene's rate, 10); lower it when the detector cannot keep up with every camera")
     group.add_argument("--folder-fps", type=float, default=10.0, help="frame rate of image-folder sources")
+    group.add_argument("--detections", type=Path, metavar="DIR",
+                       help="publish a recording of a detector's boxes instead of reading the cameras: DIR/<camera id>.txt "
+                       "with MOTChallenge rows frame,id,left,top,width,height,confidence,... (no detector needed)")
+    group.add_argument("--fps", type=float, metavar="F", help="--detections: frames per second of the recording")
+    group.add_argument("--min-confidence", type=float, default=MIN_CONFIDENCE, metavar="C",
+                       help=f"--detections: publish boxes of confidence C or more (default {MIN_CONFIDENCE:g})")
+    group.add_argument("--loop", action="store_true", help="--detections: start the recording again when it ends")
 
 
 def main(args: argparse.Namespace) -> int:
@@ -72,12 +86,17 @@ def main(args: argparse.Namespace) -> int:
     unknown = sorted(set(cameras) - set(site.camera_ids))
     if unknown:
         raise UserError(f"--cameras: site {site.site!r} has no camera {', '.join(unknown)}")
+    if args.detections is not None and args.simulate:
+        raise UserError("--detections publishes recorded boxes; --simulate makes up its own: give one of them")
+    recording = replay.load_recording(args, site, cameras) if args.detections is not None else None
     session = bus.open_session(bus.config_from_args(args))
     keys = bus.Keys(site_id)
     token = bus.announce(session, keys, SERVICE)
     try:
         with stop_on_signals() as stop:
-            if args.simulate and args.render:
+            if recording is not None:
+                replay.replay(session, keys, recording, args, stop)
+            elif args.simulate and args.render:
                 simulate_frames(session, keys, site, cameras, args, stop)
             elif args.simulate:
                 noise = DetectorNoise(jitter=args.jitter, drop=args.drop, false_positives=args.false_positives)
