@@ -133,7 +133,7 @@ def _exit_on_signal(signum: int, frame: object) -> None:
     raise SystemExit(128 + signum)
 
 
-BOXES = ("rendered", "simulated", "recorded")
+BOXES = ("rendered", "simulated", "recorded", "replayed")
 TEMPORARY_DB = "temporary"
 # With the detector on a CPU, every camera's frame of one instant waits its turn in one detector,
 # so the last camera's cylinders reach the tracker about (cameras x time per frame) after capture:
@@ -151,7 +151,9 @@ def start_pipeline(group: ServiceGroup, port: int, *, boxes: str = "rendered", h
     the people in them (ingest → detector → projector → tracker → gateway). ``"simulated"``: the
     ingest publishes the simulator's noisy boxes and no detector runs (the system without the
     detector's cost). ``"recorded"``: the ingest reads each camera's ``source`` from the site file
-    (frames recorded before, or real cameras) and the detector finds the people. ``history_db``:
+    (frames recorded before, or real cameras) and the detector finds the people. ``"replayed"``:
+    the ingest publishes a recording of boxes (``ingest_args`` name it: ``--detections DIR --fps
+    F``) and no detector runs. ``history_db``:
     a SQLite file (or database URL) the recorder writes and the gateway reads its history from;
     ``TEMPORARY_DB`` puts one in the group's log folder; None runs no recorder and the gateway
     keeps its history in memory. ``tracker_args`` default: a longer
@@ -159,7 +161,8 @@ def start_pipeline(group: ServiceGroup, port: int, *, boxes: str = "rendered", h
     if boxes not in BOXES:
         raise ValueError(f"boxes must be one of {', '.join(BOXES)}, got {boxes!r}")
     if tracker_args is None:
-        tracker_args = ("--max-wait-ms", str(DETECTOR_MAX_WAIT_MS)) if boxes != "simulated" else ()
+        with_detector = boxes in ("rendered", "recorded")
+        tracker_args = ("--max-wait-ms", str(DETECTOR_MAX_WAIT_MS)) if with_detector else ()
     # The id file lets a tracker restarted by hand (or by the chaos test) continue past old ids.
     group.start("tracker", "--id-file", str(group.log_dir / "tracker-next-id"), *tracker_args)
     group.start("projector")
@@ -178,6 +181,8 @@ def start_pipeline(group: ServiceGroup, port: int, *, boxes: str = "rendered", h
         group.start("ingest", "--simulate", "--render", *ingest_args)
     elif boxes == "recorded":
         group.start("detector", *detector_args)
+        group.start("ingest", *ingest_args)
+    elif boxes == "replayed":
         group.start("ingest", *ingest_args)
     else:
         group.start("ingest", "--simulate", *ingest_args)

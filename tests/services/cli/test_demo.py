@@ -90,3 +90,29 @@ def test_contradicting_history_options_are_refused(started: list[dict], tmp_path
     assert code == 2
     assert "--history-db and --no-history-db" in capsys.readouterr().err
     assert started == []
+
+
+@pytest.mark.parametrize(("fps", "expected"), [((), "4.0"), (("--fps", "2.5"), "2.5")])
+def test_a_recording_of_boxes_is_replayed_without_the_detector(started: list[dict], tmp_path: Path, fps: tuple,
+                                                                 expected: str) -> None:
+    port = port_pair()
+    code = main(["demo", "--port", str(port), "--duration", "0", "--log-dir", str(tmp_path), "--site", "site.yaml",
+                 "--detections", str(tmp_path), *fps])
+    assert code == 0
+    assert started == [{"site": "site.yaml", "port": port, "boxes": "replayed", "history_db": TEMPORARY_DB,
+                        "ingest_args": ("--detections", str(tmp_path.resolve()), "--fps", expected, "--loop")}]
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--detections", "DIR", "--people", "3"], "--people and --camera-fps shape the simulated hall"),
+        (["--detections", "DIR/nowhere"], "no such folder"),
+        (["--detections", "DIR", "--fps", "0"], "--fps must be a number of frames per second > 0"),
+        (["--fps", "4"], "--fps is the frame rate of a --detections recording"),
+    ],
+)
+def test_replay_options_are_checked(started: list[dict], tmp_path: Path, capsys: pytest.CaptureFixture, argv, message) -> None:
+    argv = [a.replace("DIR", str(tmp_path)) for a in argv]
+    assert main(["demo", "--port", str(port_pair()), "--log-dir", str(tmp_path), *argv]) == 2
+    assert message in capsys.readouterr().err and started == []
