@@ -21,7 +21,9 @@ def add_detector_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of ``bevflow evaluate`` that score the person detector on annotated frames."""
     group = parser.add_argument_group("detector evaluation (--detector --images DIR --annotations FILE)")
     group.add_argument("--detector", action="store_true", help="run the real person detector on images instead of using annotated boxes")
-    group.add_argument("--model", type=Path, metavar="PATH", help="the ONNX detector (default: the shipped model)")
+    group.add_argument("--model", type=Path, metavar="PATH",
+                       help="the ONNX detector (default: the shipped model), or 'rim-tiles': rim tiles turned upright "
+                       "through the shipped YOLOX-nano, for real frames of low ceilings")  # fmt: skip
     group.add_argument("--annotations", type=Path, metavar="FILE", help="COCO JSON of the --images: bbox [x,y,w,h] or rotated [cx,cy,w,h,deg]")
     group.add_argument("--threads", type=int, default=2, metavar="N", help="ONNX Runtime threads (default 2)")
     group.add_argument("--camera-height", type=float, metavar="M", help="camera height for images without 'camera_height_m' (with --focal)")
@@ -50,13 +52,17 @@ def _check(args: argparse.Namespace) -> None:
 def run_detector_evaluation(args: argparse.Namespace) -> int:
     from bevflow.detect.coco import CocoError
     from bevflow.detect.runtime import Detector, DetectorError
+    from bevflow.detect.tiles import RIM_TILES, load_rim_tiles
     from bevflow.evaluation.detector import detect_frames, score_frames
     from bevflow.evaluation.drawing import write_drawings
 
     _check(args)
     try:
         # Score every detection: AP needs the whole precision-recall curve.
-        detector = Detector(args.model, threads=args.threads, score_threshold=0.05)
+        if str(args.model) == RIM_TILES:
+            detector = load_rim_tiles(threads=args.threads, score_threshold=0.05)
+        else:
+            detector = Detector(args.model, threads=args.threads, score_threshold=0.05)
         results, ms = detect_frames(detector, args.annotations, args.images, args.camera_height, args.focal, args.scale,
                                     log=print)  # fmt: skip
         scores = score_frames(results, ms)

@@ -95,11 +95,19 @@ class FrameDetector:
             raise BadFrame("frame_size", f"a {bgr.shape[1]}x{bgr.shape[0]} frame from {camera_id}, "
                            f"whose calibration is {width}x{height}")
         x0, y0, x1, y1 = scaled_window(self.windows[camera_id], sx, bgr.shape[1], bgr.shape[0])
-        boxes = self.detectors[camera_id].detect(bgr[y0:y1, x0:x1], float(camera.center[2]), float(camera.K[0, 0]) * sx)
+        detector = self.detectors[camera_id]
+        # A rotation-aware detector turns its tiles about the point people lie radially about.
+        radial = {"centre": _nadir_in_window(camera, sx, sy, x0, y0)} if hasattr(detector, "detect_rotated") else {}
+        boxes = detector.detect(bgr[y0:y1, x0:x1], float(camera.center[2]), float(camera.K[0, 0]) * sx, **radial)
         # Window pixels → frame pixels → calibrated pixels (pixel centres: u = (u' + 0.5) / s − 0.5).
         scale = np.array([sx, sy, sx, sy])
         xyxy = (boxes.xyxy + [x0, y0, x0, y0] + 0.5) / scale - 0.5
         return Detections2D.from_boxes(camera_id, header.seq, header.capture_ns, Boxes(xyxy=xyxy, confidence=boxes.confidence))
+
+
+def _nadir_in_window(camera: object, sx: float, sy: float, x0: int, y0: int) -> tuple[float, float]:
+    u, v = camera.nadir_pixel()
+    return ((u + 0.5) * sx - 0.5 - x0, (v + 0.5) * sy - 0.5 - y0)
 
 
 def _bgr(header: FrameHeader, image: np.ndarray) -> np.ndarray:

@@ -13,6 +13,10 @@ Supported output layouts (``FORMATS``):
 - ``yolox``: one output (B, N, 5 + C) like yolov5 but, as YOLOX's exporter writes by default,
   with centres and sizes still relative to the grid cells of strides 8, 16 and 32
   (``decode_in_inference=False``); they are decoded here.
+- ``fastestdet``: one output (B, 5 + C, H, W), one box per grid cell: objectness (after sigmoid),
+  centre offsets in the cell (before tanh), width and height as shares of the input (before
+  sigmoid), class scores (after softmax), as FastestDet's exporter writes them; a cell's score
+  is objectness^0.6 · class^0.4, as FastestDet's own decoding.
 
 Every decoder keeps one class (``person_class``, 0 in COCO), drops scores under the threshold and
 returns boxes (N, 4) xyxy and scores (N,) in the model's input pixels; ``nms`` then removes
@@ -27,7 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 FloatArray = NDArray[np.float64]
-FORMATS = ("centernet", "yolov5", "yolov8", "yolox")
+FORMATS = ("centernet", "yolov5", "yolov8", "yolox", "fastestdet")
 CENTERNET_STRIDE = 4
 YOLOX_STRIDES = (8, 16, 32)
 
@@ -98,6 +102,19 @@ def decode_yolox(
     return decode_yolov5(rows, score_threshold, person_class)
 
 
+def decode_fastestdet(output: np.ndarray, input_hw: tuple[int, int], score_threshold: float, person_class: int = 0) -> tuple[FloatArray, FloatArray]:
+    """One image's (5 + C, H, W) grid → boxes and scores in input pixels."""
+    out = np.asarray(output, dtype=np.float64)
+    gh, gw = out.shape[1:]
+    scores = np.clip(out[0], 0, None) ** 0.6 * np.clip(out[5 + person_class], 0, None) ** 0.4
+    yy, xx = np.nonzero(scores >= score_threshold)
+    reg = out[1:5, yy, xx]
+    cx = (xx + np.tanh(reg[0])) / gw * input_hw[1]
+    cy = (yy + np.tanh(reg[1])) / gh * input_hw[0]
+    w, h = input_hw[1] / (1 + np.exp(-reg[2])), input_hw[0] / (1 + np.exp(-reg[3]))
+    return _cxcywh_to_xyxy(np.stack([cx, cy, w, h], 1)), scores[yy, xx]
+
+
 def yolox_grid(input_hw: tuple[int, int], strides: Sequence[int] = YOLOX_STRIDES) -> tuple[FloatArray, FloatArray]:
     """The (x, y) cell of every YOLOX output row and its stride, in the exporter's order."""
     cells, per_row = [], []
@@ -112,9 +129,12 @@ def yolox_grid(input_hw: tuple[int, int], strides: Sequence[int] = YOLOX_STRIDES
 def guess_format(output_shapes: Sequence[Sequence[int]], input_hw: tuple[int, int]) -> str:
     """The layout of a model's outputs: three outputs are the project's own model; one output
     whose middle axis is shorter than its last is YOLOv8-style; otherwise the row count tells
-    YOLOX (one row per cell of strides 8/16/32) from YOLOv5 (three anchors per cell)."""
+    YOLOX (one row per cell of strides 8/16/32) from YOLOv5 (three anchors per cell); one output
+    shaped like an image (B, C, H, W) is FastestDet's grid."""
     if len(output_shapes) == 3:
         return "centernet"
+    if len(output_shapes) == 1 and len(output_shapes[0]) == 4:
+        return "fastestdet"
     if len(output_shapes) != 1 or len(output_shapes[0]) != 3:
         raise ValueError(f"cannot tell the detector's output format from shapes {list(output_shapes)}; name it explicitly")
     _, a, b = output_shapes[0]

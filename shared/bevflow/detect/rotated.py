@@ -4,7 +4,8 @@ The convention is CEPDOF's, WEPDTOF's and RAPiD's, and OpenCV's ``boxPoints``: t
 wide and h tall before it is turned by ``degrees`` clockwise on screen (image y points down)
 about its centre. In a ceiling fisheye a person lies along the radius through the image centre,
 so a person's box has its height along the radius: its *radial angle* is the one that turns the
-box's up axis toward the centre (0 below the centre, 90 to its left).
+box's up axis toward the centre (0 below the centre, 90 to its left). A box turned half a turn
+more is the same rectangle (with its up axis outward, where a person's head is).
 
 IoU between rotated boxes is computed exactly: the intersection of two convex quadrilaterals by
 clipping one against the other's edges (Sutherland–Hodgman), in numpy, without shapely.
@@ -45,36 +46,42 @@ def rotated_corners(rotated: FloatArray) -> FloatArray:
 
 def polygon_area(poly: FloatArray) -> float:
     """Area of a simple polygon (K, 2), whatever its orientation (shoelace formula)."""
-    if len(poly) < 3:
+    return abs(_signed_area([(float(x), float(y)) for x, y in np.asarray(poly, np.float64).reshape(-1, 2)]))
+
+
+def _signed_area(pts: list[tuple[float, float]]) -> float:
+    if len(pts) < 3:
         return 0.0
-    x, y = poly[:, 0], poly[:, 1]
-    return 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
+    return 0.5 * sum(x0 * y1 - x1 * y0 for (x0, y0), (x1, y1) in zip(pts, pts[1:] + pts[:1], strict=True))
 
 
 def convex_intersection(subject: FloatArray, clip: FloatArray) -> FloatArray:
     """The intersection of two convex polygons (K, 2), as a polygon (possibly empty)."""
-    orientation = np.sign(_signed_area(clip)) or 1.0
-    out = np.asarray(subject, np.float64)
+    as_list = lambda a: [(float(x), float(y)) for x, y in np.asarray(a, np.float64).reshape(-1, 2)]  # noqa: E731
+    return np.array(_clip(as_list(subject), as_list(clip)), dtype=np.float64).reshape(-1, 2)
+
+
+def _clip(out: list[tuple[float, float]], clip: list[tuple[float, float]]) -> list[tuple[float, float]]:
+    """Sutherland–Hodgman on plain Python floats: for quadrilaterals several times faster than
+    numpy, whose per-call cost dominates arrays of four points."""
+    orientation = 1.0 if _signed_area(clip) >= 0 else -1.0
     for i in range(len(clip)):
-        if not len(out):
+        if not out:
             break
-        p, q = clip[i], clip[(i + 1) % len(clip)]
+        (px, py), (qx, qy) = clip[i], clip[(i + 1) % len(clip)]
         # Inside = on the interior side of the directed edge p→q, whichever way ``clip`` winds.
-        side = orientation * ((q[0] - p[0]) * (out[:, 1] - p[1]) - (q[1] - p[1]) * (out[:, 0] - p[0]))
+        side = [orientation * ((qx - px) * (y - py) - (qy - py) * (x - px)) for x, y in out]
         kept = []
         for j in range(len(out)):
-            a, b, sa, sb = out[j], out[(j + 1) % len(out)], side[j], side[(j + 1) % len(out)]
+            (ax, ay), (bx, by) = out[j], out[(j + 1) % len(out)]
+            sa, sb = side[j], side[(j + 1) % len(out)]
             if sa >= 0:
-                kept.append(a)
+                kept.append((ax, ay))
             if (sa >= 0) != (sb >= 0):
-                kept.append(a + (b - a) * (sa / (sa - sb)))
-        out = np.array(kept).reshape(-1, 2)
+                t = sa / (sa - sb)
+                kept.append((ax + (bx - ax) * t, ay + (by - ay) * t))
+        out = kept
     return out
-
-
-def _signed_area(poly: FloatArray) -> float:
-    x, y = poly[:, 0], poly[:, 1]
-    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
 
 
 def rotated_iou_matrix(a: FloatArray, b: FloatArray) -> FloatArray:
@@ -89,10 +96,10 @@ def rotated_iou_matrix(a: FloatArray, b: FloatArray) -> FloatArray:
         (ea[:, None, 0] < eb[None, :, 2]) & (eb[None, :, 0] < ea[:, None, 2])
         & (ea[:, None, 1] < eb[None, :, 3]) & (eb[None, :, 1] < ea[:, None, 3])
     )  # fmt: skip
-    ca, cb = rotated_corners(a), rotated_corners(b)
+    ca, cb = rotated_corners(a).tolist(), rotated_corners(b).tolist()
     area_a, area_b = a[:, 2] * a[:, 3], b[:, 2] * b[:, 3]
     for i, j in zip(*np.nonzero(touch), strict=True):
-        inter = polygon_area(convex_intersection(ca[i], cb[j]))
+        inter = abs(_signed_area(_clip([tuple(p) for p in ca[i]], [tuple(p) for p in cb[j]])))
         out[i, j] = inter / max(area_a[i] + area_b[j] - inter, 1e-12)
     return out
 

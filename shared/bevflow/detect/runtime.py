@@ -25,7 +25,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from bevflow.detect.decoders import FORMATS, decode_centernet, decode_yolov5, decode_yolov8, decode_yolox, guess_format, nms
+from bevflow.detect.decoders import FORMATS, decode_centernet, decode_fastestdet, decode_yolov5, decode_yolov8, decode_yolox, guess_format, nms
 from bevflow.detect.scaling import scale_factor
 from bevflow.detections import Boxes
 
@@ -57,7 +57,7 @@ trained on renders at ``render --zoom 1.2`` sees a person at the image centre 24
 class Detector:
     """One ONNX person detector. ``model_format`` is one of ``decoders.FORMATS`` or "auto";
     ``rgb`` and ``input_scale`` say what the model expects (defaults: BGR 0–255 for the
-    project's model and YOLOX, RGB 0–1 for YOLOv5/v8). ``zoom``: the frame is resized to this
+    project's model and YOLOX, RGB 0–1 for YOLOv5/v8, BGR 0–1 for FastestDet). ``zoom``: the frame is resized to this
     multiple of the height-adaptive scale, read from the model file (``ZOOM_METADATA_KEY``,
     default 1)."""
 
@@ -89,7 +89,8 @@ class Detector:
         self.format = model_format
         yolo_like = model_format in ("yolov5", "yolov8")
         self.rgb = yolo_like if rgb is None else rgb
-        self.input_scale = (1 / 255.0 if yolo_like else 1.0) if input_scale is None else input_scale
+        unit_range = yolo_like or model_format == "fastestdet"  # FastestDet: BGR / 255
+        self.input_scale = (1 / 255.0 if unit_range else 1.0) if input_scale is None else input_scale
         self.score_threshold, self.nms_iou, self.person_class = score_threshold, nms_iou, person_class
         self.zoom = _model_zoom(self.session)
 
@@ -163,6 +164,8 @@ class Detector:
             xyxy, scores = decode_yolov5(one[0][0], thr, self.person_class)
         elif self.format == "yolov8":
             xyxy, scores = decode_yolov8(one[0][0], thr, self.person_class)
+        elif self.format == "fastestdet":
+            xyxy, scores = decode_fastestdet(one[0][0], (int(input_hw[0]), int(input_hw[1])), thr, self.person_class)
         else:
             xyxy, scores = decode_yolox(one[0][0], (int(input_hw[0]), int(input_hw[1])), thr, self.person_class)
         keep = nms(xyxy, scores, self.nms_iou)

@@ -5,6 +5,7 @@ import pytest
 
 from bevflow.detect.decoders import (
     decode_centernet,
+    decode_fastestdet,
     decode_yolov5,
     decode_yolov8,
     decode_yolox,
@@ -87,6 +88,7 @@ def test_decode_yolox_checks_the_row_count() -> None:
         ([[1, 84, 8400]], "yolov8"),
         ([[1, 25200, 85]], "yolov5"),
         ([[1, 8400, 85]], "yolox"),
+        ([[1, 85, 22, 22]], "fastestdet"),
     ],
 )
 def test_guess_format(shapes, expected) -> None:  # noqa: ANN001
@@ -96,3 +98,13 @@ def test_guess_format(shapes, expected) -> None:  # noqa: ANN001
 def test_guess_format_refuses_unknown_layouts() -> None:
     with pytest.raises(ValueError, match="explicitly"):
         guess_format([[1, 4], [1, 4]], (640, 640))
+
+
+def test_decode_fastestdet_reads_one_box_per_cell() -> None:
+    grid = np.zeros((1 + 4 + 2, 4, 4))  # objectness, box, two classes, on a 4 × 4 grid
+    grid[0, 1, 2], grid[5, 1, 2], grid[6, 1, 2] = 0.8, 0.9, 0.1  # a person in row 1, column 2
+    grid[1:5, 1, 2] = [0.0, np.arctanh(0.5), 0.0, np.log(3.0)]  # centre (2, 1.5) cells; w 1/2, h 3/4 of the input
+    grid[0, 3, 3], grid[6, 3, 3] = 0.9, 0.9  # another class
+    xyxy, scores = decode_fastestdet(grid, (64, 64), 0.3)
+    assert scores == pytest.approx([0.8**0.6 * 0.9**0.4])
+    assert xyxy[0] == pytest.approx([32 - 16, 24 - 24, 32 + 16, 24 + 24])

@@ -182,3 +182,24 @@ cameras:
         near_x = (boxes[:, 0] - 5 <= head[0]) & (head[0] <= boxes[:, 2] + 5)
         inside = near_x & (boxes[:, 1] - 5 <= head[1]) & (head[1] <= boxes[:, 3] + 5)
         assert inside.any(), (head, boxes)
+
+
+class FakeRotatingDetector(FakeDetector):
+    """Stands in for the rim-tile detector: also takes the centre people lie radially about."""
+
+    def detect(self, image: np.ndarray, camera_height_m: float, focal_px: float, centre: tuple[float, float]) -> Boxes:  # type: ignore[override]
+        self.centre = centre
+        return super().detect(image, camera_height_m, focal_px)
+
+    def detect_rotated(self) -> None: ...
+
+
+@pytest.mark.parametrize("scale", [1.0, 0.5])
+def test_a_rotation_aware_detector_is_told_where_the_nadir_is_in_its_window(scale: float) -> None:
+    fake = FakeRotatingDetector()
+    w, h = int(1000 * scale), int(800 * scale)
+    worker = FrameDetector(WINDOWED, {"a": fake})
+    worker.detect(header(width=w, height=h), np.zeros((h, w, 3), np.uint8))
+    x0, y0, _, _ = scaled_window(worker.windows["a"], scale, w, h)
+    # A camera looking straight down: its nadir is the principal point (499.5, 399.5).
+    assert fake.centre == pytest.approx(((499.5 + 0.5) * scale - 0.5 - x0, (399.5 + 0.5) * scale - 0.5 - y0), abs=1e-6)

@@ -118,3 +118,17 @@ def test_bad_height_tables_are_refused_when_the_site_is_read(table: str, message
 def test_the_shipped_models_split_at_five_metres(height_m: float, model: Path) -> None:
     assert LOW_CEILING_MODEL.is_file() and DEFAULT_MODEL.is_file()
     assert DetectorBank(DEFAULT_RANGES, threads=1).for_height(height_m).model_path == model
+
+
+class FakeTileDetector(FakeDetector):
+    fixed_hw = (416, 416)
+
+
+def test_rim_tiles_names_the_rotation_aware_detector_shared_by_the_cameras_asking_for_it(tmp_path: Path) -> None:
+    from bevflow.detect.tiles import TILE_MODEL, RimTileDetector
+
+    site = parse_site(SITE % "rim-tiles")
+    models = CameraModels(site, site_dir=tmp_path, default="rim-tiles", load=FakeTileDetector)
+    assert isinstance(models["own"], RimTileDetector) and models["own"] is models["low"]
+    assert models["own"].tile_detector.model_path == TILE_MODEL
+    assert models.models()["own"] == "rim-tiles"

@@ -1,0 +1,99 @@
+"""The rim-tile detector: tiles turned upright about the image centre, boxes mapped back with their
+tile's angle, cut boxes dropped and duplicates merged. A stand-in tile detector finds upright
+bright blobs, as a detector trained on photographs finds upright people."""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from bevflow.detect.rotated import rotated_corners, rotated_iou_matrix
+from bevflow.detect.tiles import RIM_TILES, TILE_MODEL, RimTileDetector, TileLayout, rotated_nms
+from bevflow.detections import Boxes
+
+RADIUS = 200.0
+CENTRE = (219.5, 219.5)
+FOCAL = RADIUS / math.radians(95)  # the detector takes the circle as f × the half view of 190°
+
+
+class UprightBlobs:
+    """Finds bright blobs taller than wide in a 128 × 128 tile."""
+
+    fixed_hw = (128, 128)
+
+    def __init__(self) -> None:
+        self.tiles = 0
+
+    def detect_scaled(self, tile: np.ndarray, scale: float = 1.0) -> Boxes:
+        self.tiles += 1
+        count, _, stats, _ = cv2.connectedComponentsWithStats((tile.max(axis=2) > 100).astype(np.uint8))
+        rows = [(x, y, x + w, y + h) for x, y, w, h, area in stats[1:count] if h > 1.3 * w and area > 4]
+        return Boxes(np.array(rows, dtype=float).reshape(-1, 4), np.full(len(rows), 0.9))
+
+
+def _frame(people: list[list[float]]) -> np.ndarray:
+    frame = np.zeros((440, 440, 3), np.uint8)
+    for corners in rotated_corners(np.array(people)):
+        cv2.fillPoly(frame, [np.round(corners).astype(np.int32)], (200, 200, 200))
+    return frame
+
+
+def _radial_person(degrees: float, rho: float, w: float = 20.0, h: float = 60.0) -> list[float]:
+    a = math.radians(degrees)
+    return [CENTRE[0] - rho * math.sin(a), CENTRE[1] + rho * math.cos(a), w, h, degrees]
+
+
+@pytest.mark.parametrize("degrees", [0.0, 45.0, 90.0, 135.0, 180.0, 225.0, 270.0, 315.0, 20.0, 200.0, 290.0])
+def test_a_person_lying_along_the_radius_is_found_once_with_its_angle(degrees: float) -> None:
+    person = _radial_person(degrees, 110.0)
+    tiles = UprightBlobs()
+    rotated, conf = RimTileDetector(tiles).detect_rotated(_frame([person]), 3.0, FOCAL, CENTRE)
+    assert tiles.tiles == 8
+    assert len(rotated) == 1 and conf.tolist() == [0.9]
+    # Between two tiles' angles the tile's upright box encloses the person turned by up to 22.5°.
+    assert rotated_iou_matrix(rotated, np.array([person]))[0, 0] > (0.8 if degrees % 45 == 0 else 0.4)
+
+
+def test_people_all_round_are_each_found_and_enclosing_boxes_are_returned_for_the_pipeline() -> None:
+    people = [_radial_person(d, r) for d, r in [(10.0, 90.0), (100.0, 130.0), (190.0, 70.0), (280.0, 150.0)]]
+    detector = RimTileDetector(UprightBlobs())
+    rotated, _ = detector.detect_rotated(_frame(people), 3.0, FOCAL, CENTRE)
+    assert (rotated_iou_matrix(rotated, np.array(people)).max(axis=0) > 0.4).all() and len(rotated) == 4
+    boxes = detector.detect(_frame(people), 3.0, FOCAL, CENTRE)
+    assert len(boxes) == 4
+
+
+def test_a_sideways_blob_is_not_upright_in_any_tile() -> None:
+    lying = _radial_person(0.0, 110.0, w=60.0, h=20.0)  # across the radius
+    rotated, _ = RimTileDetector(UprightBlobs()).detect_rotated(_frame([lying]), 3.0, FOCAL, CENTRE)
+    assert len(rotated) == 0
+
+
+def test_layout_and_tile_detector_checks() -> None:
+    assert TileLayout() == TileLayout(tiles=8, side_share=0.8, start_share=0.1, nms_iou=0.4)
+
+    class Dynamic:
+        fixed_hw = None
+
+    with pytest.raises(ValueError, match="fixed square input"):
+        RimTileDetector(Dynamic())
+
+
+@pytest.mark.parametrize(
+    ("boxes", "scores", "kept"),
+    [
+        ([[0, 0, 10, 20, 0], [1, 0, 10, 20, 0]], [0.5, 0.9], [1]),  # IoU 0.82: the better one stays
+        ([[0, 0, 10, 20, 0], [0, 0, 10, 20, 90]], [0.9, 0.8], [0, 1]),  # a cross: IoU 1/3, both stay
+        ([[0, 0, 10, 20, 0], [50, 0, 10, 20, 0], [0, 1, 10, 20, 180]], [0.7, 0.6, 0.8], [2, 1]),  # a half turn is the same box
+    ],
+)
+def test_rotated_nms(boxes: list, scores: list, kept: list) -> None:
+    assert rotated_nms(np.array(boxes, float), np.array(scores), 0.4).tolist() == kept
+
+
+def test_the_shipped_tile_model_is_named() -> None:
+    assert RIM_TILES == "rim-tiles" and TILE_MODEL.name == "yolox-nano-coco.onnx" and TILE_MODEL.is_file()
+    assert (TILE_MODEL.parent / "LICENSE-yolox-nano-coco.txt").is_file()
