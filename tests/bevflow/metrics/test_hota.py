@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import doctest
 import importlib.util
 import math
 
@@ -125,3 +126,9 @@ def test_same_as_trackeval(seed: int, zero_distance_m: float) -> None:
     theirs = trackeval_hota(gt, hyp, zero_distance_m)
     assert 0.2 < theirs["HOTA"] < 0.95  # a sequence with something of everything to score
     assert {k: ours[k] for k in theirs} == pytest.approx(theirs, abs=1e-12)
+
+
+def test_docstring_example() -> None:
+    import bevflow.metrics.hota
+
+    assert doctest.testmod(bevflow.metrics.hota).failed == 0
