@@ -120,6 +120,18 @@ class CameraConfig(_Strict):
         return float(self.build().center[2])
 
 
+CROWDED_SHARE = 0.8  # without a crowded_level of its own, a zone (or the site) is crowded from 80 % of capacity
+
+
+def crowded_level_of(capacity: int | None) -> int | None:
+    """The default crowded level for ``capacity`` (None without one); at least 1.
+
+    >>> crowded_level_of(50), crowded_level_of(1), crowded_level_of(None)
+    (40, 1, None)
+    """
+    return None if capacity is None else max(1, math.floor(CROWDED_SHARE * capacity))
+
+
 class Zone(_Strict):
     id: Annotated[str, Field(min_length=1, pattern=r"^[A-Za-z0-9_.-]+$")]
     name: str = ""
@@ -142,7 +154,7 @@ class Zone(_Strict):
     def effective_crowded_level(self) -> int | None:
         if self.crowded_level is not None:
             return self.crowded_level
-        return None if self.capacity is None else max(1, math.floor(0.8 * self.capacity))
+        return crowded_level_of(self.capacity)
 
 
 class Thresholds(_Strict):
@@ -161,11 +173,11 @@ class Thresholds(_Strict):
         ),
     )
     incident_min_duration_s: Annotated[float, Field(ge=0)] = Field(
-        default=10.0, description="a group of people too close becomes an incident once it has lasted this long")
+        default=30.0, description="a group of people too close becomes an incident once it has lasted this long")
     incident_quiet_s: Annotated[float, Field(ge=0)] = Field(
         default=15.0, description="an incident closes after this long without anyone in it too close")
     incident_ack_min_s: Annotated[float, Field(ge=0)] = Field(
-        default=30.0, description="an incident that ended shorter than this (and small) needs no acknowledgement")
+        default=60.0, description="an incident that ended shorter than this (and small) needs no acknowledgement")
     site_capacity: Annotated[int, Field(ge=0)] | None = None
     capacity_hysteresis: Annotated[int, Field(ge=0)] = 2
     track_activate_hits: Annotated[int, Field(ge=1)] = 3
@@ -260,6 +272,11 @@ class Site(_Strict):
     detectors: list[DetectorRange] | None = Field(
         default=None, description="detector model by mounting height; default: the shipped model for every height"
     )
+
+    @property
+    def crowded_level(self) -> int | None:
+        """The whole site's crowded level: the default share of ``thresholds.site_capacity``."""
+        return crowded_level_of(self.thresholds.site_capacity)
 
     @field_validator("detectors")
     @classmethod
