@@ -1,5 +1,5 @@
 """Detector speed at the scaled input of cameras at given heights: ``python -m
-bevflow.detect.benchmark [--model PATH] [--heights 3.3 8.1] [--threads 1 2] [--repeats 30]``.
+bevflow.detect.benchmark [--model PATH | --model rim-tiles] [--heights 3.3 8.1] [--threads 1 2] [--repeats 30]``.
 
 Prints, per height and thread count, the model input size and the median and 90th-percentile
 milliseconds of ``Detector.detect`` on a rendered frame (resize + inference + decoding + NMS).
@@ -19,6 +19,7 @@ import numpy as np
 from bevflow.camera import FisheyeCamera
 from bevflow.detect.runtime import Detector
 from bevflow.detect.scaling import scaled_focal
+from bevflow.detect.tiles import RIM_TILES, load_rim_tiles
 from bevflow.sim.bodies import BodyShape, pose_bodies
 from bevflow.sim.render import FisheyeRenderer, Room
 
@@ -38,7 +39,7 @@ def rendered_frame(height: float, people: int = 15, zoom: float = 1.5, seed: int
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0], formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--model", type=Path, help="ONNX model (default: the shipped one)")
+    parser.add_argument("--model", type=Path, help="ONNX model (default: the shipped one), or rim-tiles (bevflow.detect.tiles)")
     parser.add_argument("--heights", type=float, nargs="+", default=[3.3, 8.1])
     parser.add_argument("--threads", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--repeats", type=int, default=30)
@@ -47,8 +48,7 @@ def main(argv: list[str] | None = None) -> int:
     for h in args.heights:
         frame, focal = rendered_frame(h)
         for t in args.threads:
-            det = Detector(args.model, threads=t)
-            shape = det.prepare(frame, det.scale_for(h, focal)).tensor.shape
+            det, shape = _detector(args.model, t, frame, h, focal)
             for _ in range(3):
                 det.detect(frame, h, focal)
             times = []
@@ -56,10 +56,20 @@ def main(argv: list[str] | None = None) -> int:
                 start = time.perf_counter()
                 det.detect(frame, h, focal)
                 times.append(1000 * (time.perf_counter() - start))
-            rows.append({"height_m": h, "threads": t, "input": f"{shape[3]}x{shape[2]}", "frame": f"{frame.shape[1]}x{frame.shape[0]}",
+            rows.append({"height_m": h, "threads": t, "input": shape, "frame": f"{frame.shape[1]}x{frame.shape[0]}",
                          "median_ms": round(float(np.median(times)), 2), "p90_ms": round(float(np.percentile(times, 90)), 2)})  # fmt: skip
             print(json.dumps(rows[-1]), flush=True)
     return 0
+
+
+def _detector(model: Path | None, threads: int, frame: np.ndarray, height: float, focal: float) -> tuple[object, str]:
+    """The detector to time and a description of its input."""
+    if str(model) == RIM_TILES:
+        tiles = load_rim_tiles(threads=threads)
+        return tiles, f"{tiles.layout.tiles} tiles of {tiles.input_px}x{tiles.input_px}"
+    det = Detector(model, threads=threads)
+    shape = det.prepare(frame, det.scale_for(height, focal)).tensor.shape
+    return det, f"{shape[3]}x{shape[2]}"
 
 
 if __name__ == "__main__":
