@@ -47,6 +47,8 @@ def _check(args: argparse.Namespace) -> None:
         raise UserError(f"--scale must be a number > 0, got {args.scale}")
     if args.threads <= 0:
         raise UserError(f"--threads must be positive, got {args.threads}")
+    if str(args.model) == "rim-tiles" and args.scale is not None:
+        raise UserError("--model rim-tiles sizes its tiles from the focal length: give --camera-height and --focal, or neither, not --scale")
 
 
 def run_detector_evaluation(args: argparse.Namespace) -> int:

@@ -68,12 +68,13 @@ class CameraModels:
     ) -> None:
         options = {"score_threshold": score_threshold}
         by_path: dict[Path, Detector] = {}
+        tiles: list[RimTileDetector] = []  # one tile detector serves every camera that asks for it
 
-        def named(name: str | Path) -> Detector:
-            if str(name) == RIM_TILES:  # one tile detector serves every camera that asks for it
-                if RIM_TILES not in by_path:
-                    by_path[RIM_TILES] = RimTileDetector(load(TILE_MODEL, threads, **options))  # type: ignore[index]
-                return by_path[RIM_TILES]  # type: ignore[index]
+        def named(name: str | Path) -> Detector | RimTileDetector:
+            if str(name) == RIM_TILES:
+                if not tiles:
+                    tiles.append(RimTileDetector(load(TILE_MODEL, threads, **options)))
+                return tiles[0]
             path = resolve_model(name, site_dir).resolve()
             if path not in by_path:
                 by_path[path] = load(path, threads, **options)
@@ -90,14 +91,14 @@ class CameraModels:
             spans = ", ".join(f"[{r.min_m:g}, {r.max_m:g})" for r in checked)
             raise DetectorError(f"no detector model covers a camera {height_m:.2f} m high (ranges: {spans})")
 
-        self.detectors: dict[str, Detector] = {}
+        self.detectors: dict[str, Detector | RimTileDetector] = {}
         for config in site.cameras:
             if cameras is not None and config.id not in cameras:
                 continue
             name = config.detector or default
             self.detectors[config.id] = named(name) if name is not None else for_height(config.height_m)
 
-    def __getitem__(self, camera: str) -> Detector:
+    def __getitem__(self, camera: str) -> Detector | RimTileDetector:
         return self.detectors[camera]
 
     def models(self) -> dict[str, str]:

@@ -49,9 +49,16 @@ def test_given_calibration_is_used_and_nothing_is_assumed(tmp_path: Path, capsys
     ("extra", "message"),
     [(["--camera-height", "3"], "give --camera-height and --focal together"),
      (["--scale", "0"], "--scale must be a number > 0, got 0.0"),
-     (["--threads", "0"], "--threads must be positive, got 0")],
+     (["--threads", "0"], "--threads must be positive, got 0"),
+     (["--model", "rim-tiles", "--scale", "0.5"], "--model rim-tiles sizes its tiles from the focal length")],
 )
 def test_bad_options_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture, extra: list[str], message: str) -> None:
     images, ann = _frames(tmp_path)
     assert main(["evaluate", "--detector", "--images", str(images), "--annotations", str(ann), *extra]) == 2
     assert message in capsys.readouterr().err
+
+
+def test_rim_tiles_runs_on_the_same_frames(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    images, ann = _frames(tmp_path)
+    assert main(["evaluate", "--detector", "--model", "rim-tiles", "--images", str(images), "--annotations", str(ann)]) == 0
+    assert "AP50_rotated" in capsys.readouterr().out
