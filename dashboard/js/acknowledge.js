@@ -39,17 +39,14 @@ export async function loadAcknowledgements(site) {
   return records;
 }
 
-/**
- * Acknowledge alert `alertId` of `site`; resolves to {at, by, note} once the gateway has stored it.
- * Throws an Error saying why not (not allowed for a viewer, unknown alert, gateway unreachable).
- */
-export async function acknowledgeAlert(site, alertId, note = "") {
+/** POST `body` as JSON to `path`; the answer, or an Error saying why not. */
+async function post(path, body) {
   let response;
   try {
-    response = await fetch(`/api/alerts/${encodeURIComponent(alertId)}/acknowledge`, {
+    response = await fetch(path, {
       method: "POST",
       headers: { "Content-Type": "application/json", Accept: "application/json" },
-      body: JSON.stringify({ note }),
+      body: JSON.stringify(body),
       credentials: "same-origin",
     });
   } catch {
@@ -58,7 +55,25 @@ export async function acknowledgeAlert(site, alertId, note = "") {
   const answer = await response.json().catch(() => ({}));
   if (response.status === 401) location.assign(`/login.html?next=${encodeURIComponent(location.pathname)}`);
   if (!response.ok) throw new Error(typeof answer.detail === "string" ? answer.detail : `HTTP ${response.status}`);
-  const stored = record(answer);
+  return answer;
+}
+
+/** Acknowledge the alerts `ids` of `site` in one request; resolves to [[id, {at, by, note}], ...] for those stored. */
+export async function acknowledgeAlerts(site, ids, note = "") {
+  const answer = await post("/api/alerts/acknowledge", { ids, note });
+  const records = live.get(site)?.records;
+  return answer.acknowledged.map((ack) => {
+    if (records && !records.has(ack.alert_id)) records.set(ack.alert_id, record(ack));
+    return [ack.alert_id, records?.get(ack.alert_id) || record(ack)];
+  });
+}
+
+/**
+ * Acknowledge alert `alertId` of `site`; resolves to {at, by, note} once the gateway has stored it.
+ * Throws an Error saying why not (not allowed for a viewer, unknown alert, gateway unreachable).
+ */
+export async function acknowledgeAlert(site, alertId, note = "") {
+  const stored = record(await post(`/api/alerts/${encodeURIComponent(alertId)}/acknowledge`, { note }));
   const records = live.get(site)?.records;
   if (records && !records.has(alertId)) records.set(alertId, stored);
   return records?.get(alertId) || stored;

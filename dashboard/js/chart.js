@@ -12,6 +12,7 @@ export class OccupancyChart {
     this.canvas = canvas;
     this.history = null; // OccupancyHistory
     this.intervals = []; // CrowdedIntervalView list
+    this.degraded = []; // /api/health degraded_periods: when the counts were not to be trusted
     this.scope = null; // zone id, or null for the whole site
     this.limits = { capacity: null, crowded: null };
     this.nowNs = null;
@@ -23,6 +24,13 @@ export class OccupancyChart {
     this.history = history;
     this.intervals = intervals;
     this.nowNs = nowNs;
+    this.draw();
+  }
+
+  /** Periods of degraded data (/api/health), hatched so that a dip there does not read as people leaving. */
+  setDegraded(periods) {
+    this.degraded = periods || [];
+    this.canvas.dataset.degraded = String(this.degraded.length);
     this.draw();
   }
 
@@ -68,6 +76,7 @@ export class OccupancyChart {
     };
 
     this.drawBands(ctx, colors, x, box, startNs, endNs);
+    this.drawDegraded(ctx, colors, x, box, startNs, endNs);
     this.drawAxes(ctx, colors, x, y, box, top, startNs, endNs);
     this.drawLimit(ctx, this.limits.capacity, colors.over, "capacity", y, box);
     this.drawLimit(ctx, this.limits.crowded, colors.crowded, "crowded", y, box);
@@ -90,6 +99,31 @@ export class OccupancyChart {
       if (to <= from) continue;
       ctx.fillRect(x(from), box.top, Math.max(2, x(to) - x(from)), box.bottom - box.top);
     }
+  }
+
+  drawDegraded(ctx, colors, x, box, startNs, endNs) {
+    ctx.save();
+    ctx.strokeStyle = withAlpha(colors.label, 0.45);
+    ctx.lineWidth = 1;
+    for (const period of this.degraded) {
+      const from = Math.max(startNs, period.start_ns);
+      const to = Math.min(endNs, period.end_ns ?? endNs);
+      if (to <= from) continue;
+      const [left, right] = [x(from), Math.max(x(from) + 3, x(to))];
+      ctx.beginPath();
+      ctx.rect(left, box.top, right - left, box.bottom - box.top);
+      ctx.clip();
+      ctx.beginPath();
+      for (let px = left - (box.bottom - box.top); px < right; px += 6) {
+        ctx.moveTo(px, box.bottom);
+        ctx.lineTo(px + (box.bottom - box.top), box.top);
+      }
+      ctx.stroke();
+      ctx.restore();
+      ctx.save();
+      ctx.strokeStyle = withAlpha(colors.label, 0.45);
+    }
+    ctx.restore();
   }
 
   drawAxes(ctx, colors, x, y, box, top, startNs, endNs) {

@@ -26,7 +26,8 @@ export function duration(seconds) {
 }
 
 export const ALERT_TYPES = {
-  distance_violation: { label: "Too close", severity: "alert" },
+  distance_incident: { label: "Too close", severity: "alert" },
+  distance_violation: { label: "Too close (pair)", severity: "alert" },
   over_capacity: { label: "Over capacity", severity: "alert" },
   camera_down: { label: "Camera down", severity: "alert" },
   calibration_drift: { label: "Calibration drift", severity: "info" },

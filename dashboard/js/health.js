@@ -5,10 +5,18 @@ import { duration } from "./format.js";
 
 const STATUS_TEXT = { ok: "all systems ok", degraded: "degraded", stale: "no fresh data", no_data: "no data yet", down: "gateway unreachable" };
 
-/** The header pill: the gateway's overall status (or "down" when it cannot be reached). */
-export function renderStatus(pill, status) {
+/** The header pill: the gateway's overall status (or "down" when it cannot be reached), and why. */
+export function renderStatus(pill, status, reasons = []) {
   pill.dataset.status = status;
   pill.textContent = STATUS_TEXT[status] || status;
+  pill.title = reasons.length ? `Degraded: ${reasons.join("; ")}` : "Gateway health";
+}
+
+/** The warning under the top bar while the live data is incomplete or late (/api/health reasons). */
+export function renderDegraded(banner, detail, health) {
+  const reasons = health.reasons || [];
+  banner.hidden = reasons.length === 0;
+  detail.textContent = reasons.join("; ");
 }
 
 function badge(name, state, detail) {

@@ -10,20 +10,20 @@ import { OccupancyChart } from "./chart.js";
 import { ConnectionMonitor } from "./connection.js";
 import { el } from "./dom.js";
 import { clockTime, dateFromNs } from "./format.js";
-import { renderCameras, renderServices, renderStatus } from "./health.js";
+import { renderCameras, renderDegraded, renderServices, renderStatus } from "./health.js";
 import { FloorMap } from "./map.js";
-import { renderOccupancy } from "./occupancy.js";
+import { occupancyFromTracks, renderOccupancy } from "./occupancy.js";
 import { PeopleList } from "./people.js";
 import { PersonPanel } from "./person.js";
 import { showSession } from "./session.js";
 
 const $ = (id) => document.getElementById(id);
-const OCCUPANCY_MS = 1000;
+const LIMITS_MS = 10000; // capacities and crowded levels: they change only with the site file
 const HEALTH_MS = 3000;
 const HISTORY_MS = 15000;
 const PEOPLE_LIST_MS = 500; // the list is for finding someone, not for watching them move
 
-const debug = { ready: false, people: 0, violations: 0, alerts: 0, attention: 0, selected: null, trajectory: 0, screenOf: () => null };
+const debug = { ready: false, people: 0, violations: 0, alerts: 0, attention: 0, selected: null, focused: null, trajectory: 0, screenOf: () => null };
 window.bevflow = debug;
 
 const monitor = new ConnectionMonitor($("connection-banner"), $("connection-detail"), {
@@ -101,8 +101,17 @@ async function boot() {
     },
   );
   const feed = new AlertFeed(
-    { list: $("alert-list"), empty: $("alerts-empty"), count: $("alerts-count"), announcer: $("alert-announcer"), showEnded: $("show-ended") },
-    { site: site.site, zoneName, onTrack: (id) => select(id), onChange: showAttention },
+    {
+      list: $("alert-list"), empty: $("alerts-empty"), count: $("alerts-count"), announcer: $("alert-announcer"),
+      showEnded: $("show-ended"), held: $("alerts-held"), ackAll: $("ack-all"),
+    },
+    {
+      site: site.site, zoneName, onTrack: (id) => select(id), onChange: showAttention,
+      onFocus: (alert) => {
+        map.focusAlert(alert);
+        debug.focused = alert ? alert.id : null;
+      },
+    },
   );
   await feed.loadAcknowledgements();
 
@@ -116,10 +125,25 @@ async function boot() {
 
   // --- live streams ---------------------------------------------------------------------------
   let peopleListAt = -Infinity;
+  let limits = null; // /api/occupancy: capacities and crowded levels
+  let panelSignature = "";
+  /** The occupancy panel and the zone colours from the tick the map draws. */
+  function showOccupancy(tracks) {
+    if (!limits) return;
+    const now = occupancyFromTracks(tracks, limits);
+    debug.panelTotal = now.total;
+    debug.panelTimeNs = tracks.time_ns;
+    const signature = JSON.stringify([now.total, now.zones.map((z) => z.count)]);
+    if (signature === panelSignature) return;
+    panelSignature = signature;
+    renderOccupancy($("occupancy-site"), $("zone-bars"), now, now.crowded_level);
+    map.setZoneLevels(now.zones);
+  }
   const tracksSocket = new LiveSocket("/ws/tracks", {
     onMessage: (tracks) => {
       latestNs = tracks.time_ns;
       map.setTracks(tracks);
+      showOccupancy(tracks);
       feed.setNow(latestNs);
       if (performance.now() - peopleListAt > PEOPLE_LIST_MS) {
         people.update(tracks);
@@ -146,6 +170,7 @@ async function boot() {
       const [recent, active] = await Promise.all([getJson("/api/alerts?limit=100"), getJson("/api/alerts?active=true&limit=1000")]);
       for (const alert of [...recent.items, ...active.items].reverse()) feed.upsert(alert);
       feed.reconcileActive(active.items.map((a) => a.id), askedMs);
+      feed.goLive();
     } catch {
       // the polls report an unreachable gateway; the next reconnect catches up again
     }
@@ -154,25 +179,28 @@ async function boot() {
   alertsSocket.start();
 
   // --- polls ----------------------------------------------------------------------------------
-  const limits = new Map();
+  const chartLimits = new Map();
   every(
-    OCCUPANCY_MS,
+    LIMITS_MS,
     polled(async () => {
       const now = await getJson("/api/occupancy");
-      const siteCrowded = now.capacity === null ? null : Math.max(1, Math.floor(0.8 * now.capacity));
-      renderOccupancy($("occupancy-site"), $("zone-bars"), now, siteCrowded);
-      map.setZoneLevels(now.zones);
-      limits.set("", { capacity: now.capacity, crowded: siteCrowded });
-      for (const zone of now.zones) limits.set(zone.id, { capacity: zone.capacity, crowded: zone.crowded_level });
+      const first = limits === null;
+      limits = now;
+      if (first) renderOccupancy($("occupancy-site"), $("zone-bars"), now, now.crowded_level); // until the next tick
+      chartLimits.set("", { capacity: now.capacity, crowded: now.crowded_level });
+      for (const zone of now.zones) chartLimits.set(zone.id, { capacity: zone.capacity, crowded: zone.crowded_level });
       const scope = $("chart-scope").value;
-      chart.setScope(scope || null, limits.get(scope) || { capacity: null, crowded: null });
+      chart.setScope(scope || null, chartLimits.get(scope) || { capacity: null, crowded: null });
     }),
   );
   every(
     HEALTH_MS,
     polled(async () => {
       const [health, cameras] = await Promise.all([getJson("/api/health"), getJson("/api/cameras")]);
-      if (monitor.live) renderStatus($("system-status"), health.status);
+      if (monitor.live) renderStatus($("system-status"), health.status, health.reasons);
+      renderDegraded($("degraded-banner"), $("degraded-detail"), health);
+      chart.setDegraded(health.degraded_periods);
+      debug.degraded = health.reasons.length;
       renderServices($("services"), health);
       renderCameras($("cameras"), cameras);
       map.setCameras(cameras);
@@ -193,7 +221,7 @@ async function boot() {
   for (const zone of site.zones) $("chart-scope").append(el("option", { value: zone.id }, zone.name || zone.id));
   $("chart-scope").addEventListener("change", (event) => {
     const scope = event.target.value;
-    chart.setScope(scope || null, limits.get(scope) || { capacity: null, crowded: null });
+    chart.setScope(scope || null, chartLimits.get(scope) || { capacity: null, crowded: null });
   });
   setUpView3d(config.view3d_url);
   document.addEventListener("keydown", (event) => event.key === "Escape" && panel.hide());

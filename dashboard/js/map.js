@@ -2,6 +2,7 @@
 // trails, red lines between people too close together, and the selected person's trajectory.
 // Drawn on a canvas in metres, north (+Y) up; redrawn only when something changed.
 
+import { incidentPeople } from "./alert-detail.js";
 import { withAlpha } from "./dom.js";
 import { drawCameras, drawCoverage, drawFloor, drawNotice, drawScaleBar, drawZoneTags, drawZones, outlinedText, palette } from "./floorplan.js";
 import { View, floorExtent } from "./geometry.js";
@@ -23,6 +24,7 @@ export class FloorMap {
     this.trails = new Map(); // track id -> [[t_s, x, y], ...]
     this.tickWallMs = 0;
     this.selected = null;
+    this.focus = null; // the alert clicked in the feed: {id, xy, people: Set, zone}
     this.trajectory = [];
     this.hover = null;
     this.view = null;
@@ -77,6 +79,20 @@ export class FloorMap {
   select(id, points = []) {
     this.selected = id;
     this.trajectory = points;
+    this.invalidate();
+  }
+
+  /** Show an alert from the feed (or nothing, with null): its place ringed, its people marked. */
+  focusAlert(alert) {
+    const event = alert?.event || {};
+    this.focus = alert && {
+      id: alert.id,
+      xy: event.position || null,
+      people: new Set(alert.type === "distance_incident" ? incidentPeople(alert) : alert.tracks),
+      zone: alert.zone,
+      camera: event.camera || null,
+    };
+    this.canvas.dataset.focus = alert ? alert.id : "";
     this.invalidate();
   }
 
@@ -161,6 +177,7 @@ export class FloorMap {
     this.drawTrails(ctx, colors);
     this.drawViolations(ctx, colors);
     this.drawPeople(ctx, colors);
+    this.drawFocus(ctx, colors, zones);
     this.drawn = this.people;
     ctx.globalAlpha = 1;
     drawZoneTags(ctx, view, colors, zones, this.levels, width);
@@ -172,6 +189,49 @@ export class FloorMap {
 
 
 
+
+  /** The focused alert: a ring around its people (or its zone, or its camera), and their ids. */
+  drawFocus(ctx, colors, zones) {
+    const focus = this.focus;
+    if (!focus) return;
+    const members = this.people.filter((p) => focus.people.has(p.id));
+    this.canvas.dataset.focusPeople = members.map((p) => p.id).join(",");
+    ctx.save();
+    ctx.strokeStyle = colors.selected;
+    ctx.lineWidth = 2.5;
+    ctx.setLineDash([6, 4]);
+    const camera = focus.camera && this.cameras.find((c) => c.id === focus.camera);
+    const points = members.length ? members.map((p) => p.xy) : focus.xy ? [focus.xy] : camera?.position ? [camera.position] : [];
+    if (points.length) {
+      const cx = points.reduce((a, p) => a + p[0], 0) / points.length;
+      const cy = points.reduce((a, p) => a + p[1], 0) / points.length;
+      const spread = Math.max(1.5, ...points.map((p) => Math.hypot(p[0] - cx, p[1] - cy) + 1));
+      const [x, y] = this.view.toScreen(cx, cy);
+      ctx.beginPath();
+      ctx.arc(x, y, spread * this.view.scale, 0, 2 * Math.PI);
+      ctx.stroke();
+    } else {
+      const zone = zones.find((z) => z.id === focus.zone);
+      if (zone) {
+        ctx.beginPath();
+        zone.polygon.forEach(([zx, zy], i) => ctx[i ? "lineTo" : "moveTo"](...this.view.toScreen(zx, zy)));
+        ctx.closePath();
+        ctx.stroke();
+      }
+    }
+    ctx.setLineDash([]);
+    ctx.font = "700 12px system-ui, sans-serif";
+    ctx.textAlign = "left";
+    ctx.textBaseline = "bottom";
+    for (const person of members) {
+      const [x, y] = this.view.toScreen(person.xy[0], person.xy[1]);
+      ctx.beginPath();
+      ctx.arc(x, y, 11, 0, 2 * Math.PI);
+      ctx.stroke();
+      outlinedText(ctx, `#${person.id}`, x + 12, y - 8, colors.text, colors.floor);
+    }
+    ctx.restore();
+  }
 
   drawTrajectory(ctx, colors) {
     if (this.selected === null || this.trajectory.length < 1) return;

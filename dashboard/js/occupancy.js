@@ -1,4 +1,8 @@
 // "Occupancy now": the site's count against its capacity, and one bar per zone.
+//
+// The counts come from the same Tracks message the map draws (each person carries its zones), so
+// the map and this panel always show the same tick; capacities and crowded levels come from
+// /api/occupancy.
 
 import { el } from "./dom.js";
 
@@ -25,7 +29,32 @@ function ofCapacity(count, capacity) {
   return capacity === null || capacity === undefined ? String(count) : `${count} / ${capacity}`;
 }
 
-/** Render /api/occupancy into the site line and the zone list. */
+/** The level of a count, by the rule of the gateway's /api/occupancy (``routes/occupancy.level_of``). */
+function levelOf(count, crowded, capacity) {
+  if (capacity !== null && capacity !== undefined && count > capacity) return "over_capacity";
+  if (crowded !== null && crowded !== undefined && count >= crowded) return "crowded";
+  return (capacity ?? crowded ?? null) === null ? "unknown" : "normal";
+}
+
+/** An /api/occupancy-shaped view of one Tracks message, with the limits of `limits` (/api/occupancy). */
+export function occupancyFromTracks(tracks, limits) {
+  const counts = new Map();
+  for (const person of tracks.tracks) for (const zone of person.zones) counts.set(zone, (counts.get(zone) || 0) + 1);
+  const total = tracks.tracks.length;
+  return {
+    time_ns: tracks.time_ns,
+    total,
+    capacity: limits.capacity,
+    crowded_level: limits.crowded_level,
+    level: levelOf(total, limits.crowded_level, limits.capacity),
+    zones: limits.zones.map((z) => {
+      const count = counts.get(z.id) || 0;
+      return { ...z, count, level: levelOf(count, z.crowded_level, z.capacity) };
+    }),
+  };
+}
+
+/** Render an /api/occupancy-shaped view into the site line and the zone list. */
 export function renderOccupancy(siteNode, zonesNode, now, crowdedLevelOfSite) {
   const parts = [
     el("span", { class: "big-count", "aria-label": `${now.total} people on site` }, String(now.total)),

@@ -8,12 +8,14 @@ starts counting again instead of being read as a huge gap.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections import deque
+from dataclasses import dataclass, field
 from typing import Literal
 
 from bevflow.schemas import CameraHealthEvent
 
 NS = 1_000_000_000
+RECENT_NS = 30 * NS  # the window of ``recent_frames`` and ``recent_dropped``
 CameraState = Literal["up", "down", "unknown"]
 
 
@@ -25,6 +27,7 @@ class CameraCounters:
     last_capture_ns: int | None = None
     last_received_ns: int | None = None
     down_event: CameraHealthEvent | None = None
+    recent: deque[tuple[int, int]] = field(default_factory=deque)  # (received ns, frames lost just before), last RECENT_NS
 
 
 @dataclass(frozen=True)
@@ -40,6 +43,8 @@ class CameraHealth:
     last_capture_ns: int | None
     last_received_ns: int | None
     age_s: float | None
+    recent_frames: int = 0  # frames received in the last 30 s
+    recent_dropped: int = 0  # frames lost in the last 30 s
 
 
 class CameraHealthBook:
@@ -59,8 +64,11 @@ class CameraHealthBook:
             return False
         if c.last_seq is not None and seq == c.last_seq:
             return True  # the same frame seen through another message kind
-        if c.last_seq is not None and seq > c.last_seq:
-            c.dropped += seq - c.last_seq - 1
+        lost = seq - c.last_seq - 1 if c.last_seq is not None and seq > c.last_seq else 0
+        c.dropped += lost
+        c.recent.append((received_ns, lost))
+        while c.recent and received_ns - c.recent[0][0] > RECENT_NS:
+            c.recent.popleft()
         c.received += 1
         c.last_seq = seq
         c.last_capture_ns = capture_ns
@@ -98,4 +106,6 @@ class CameraHealthBook:
             last_capture_ns=c.last_capture_ns,
             last_received_ns=c.last_received_ns,
             age_s=age_s,
+            recent_frames=sum(1 for r, _ in c.recent if now_ns - r <= RECENT_NS),
+            recent_dropped=sum(lost for r, lost in c.recent if now_ns - r <= RECENT_NS),
         )

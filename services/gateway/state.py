@@ -29,6 +29,7 @@ from bevflow.schemas import (
 from bevflow.site import Site
 
 from bevflow_services.gateway.camera_health import CameraHealth, CameraHealthBook
+from bevflow_services.gateway.degraded import DataQuality, DegradedPeriod
 from bevflow_services.gateway.fanout import Broadcaster
 from bevflow_services.gateway.history import HistoryStore, InMemoryHistory
 
@@ -82,6 +83,7 @@ class GatewayState:
         self.started_ns = clock()
         self._lock = threading.Lock()
         self._cameras = CameraHealthBook([c.id for c in site.cameras], camera_timeout_s)
+        self._quality = DataQuality()
         self._tracks: Tracks | None = None
         self._tracks_received_ns: int | None = None
         self._occupancy: Occupancy | None = None
@@ -118,6 +120,7 @@ class GatewayState:
         with self._lock:
             self._tracks = tracks
             self._tracks_received_ns = self.clock()
+            self._quality.tick(tracks.time_ns, self._tracks_received_ns)
         self.tracks_stream.publish(tracks)
         return True
 
@@ -188,6 +191,14 @@ class GatewayState:
         now = self.clock()
         with self._lock:
             return [self._cameras.health(c.id, now) for c in self.site.cameras]
+
+    def degraded(self) -> tuple[list[str], list[DegradedPeriod]]:
+        """What is wrong with the live data now (``bevflow_services.gateway.degraded``; empty if
+        nothing), and the degraded periods of the last hour, oldest first."""
+        cameras = self.camera_health()
+        with self._lock:
+            reasons = self._quality.reasons(self.clock(), cameras)
+            return reasons, [DegradedPeriod(p.start_ns, p.end_ns, list(p.reasons)) for p in self._quality.periods]
 
     def services(self) -> list[ServiceEntry]:
         """Live service instances, sorted by name then instance."""

@@ -179,6 +179,22 @@ class Page:
                 raise CdpError(f"waited {timeout_s} s for {what or expression}")
             time.sleep(0.05)
 
+    def move_to(self, x: float, y: float) -> None:
+        """Move the mouse pointer to page pixel (x, y), as a user hovering there."""
+        self.call("Input.dispatchMouseEvent", {"type": "mouseMoved", "x": x, "y": y})
+
+    def centre_of(self, selector: str) -> dict[str, float]:
+        """The page pixel at the middle of the first visible element matching ``selector``."""
+        return self.wait_for(
+            f"""(() => {{
+                const node = document.querySelector({json.dumps(selector)});
+                if (!node || node.hidden) return null;
+                const r = node.getBoundingClientRect();
+                return r.width && r.height ? {{x: r.left + r.width / 2, y: r.top + r.height / 2}} : null;
+            }})()""",
+            what=f"a visible {selector}",
+        )
+
     def click_at(self, x: float, y: float) -> None:
         """A real left click (pointer moved, pressed, released) at page pixel (x, y)."""
         self.call("Input.dispatchMouseEvent", {"type": "mouseMoved", "x": x, "y": y})

@@ -18,7 +18,7 @@ import numpy as np
 from bevflow.analytics.zones import points_in_polygons
 from bevflow.schemas import (
     CameraHealthEvent,
-    DistanceViolation,
+    DistanceIncident,
     FrameHeader,
     Occupancy,
     OverCapacity,
@@ -197,18 +197,24 @@ class Scene:
             self.state.apply(self.tracks(now_ns + int(s * S)))
         for name, instance in [("ingest", c) for c in UP_CAMERAS] + [("detector", "d1"), ("projector", "p1"), ("tracker", "t1")]:
             self.state.service_up(name, instance)
-        self.state.apply(DistanceViolation(id="dv-earlier", start_ns=now_ns - 720 * S, end_ns=now_ns - 680 * S,
-                                           tracks=[7, 9], min_distance_m=1.4, limit_m=2.0))
+        self.state.apply(incident("inc-earlier", now_ns - 720 * S, [7, 9], end_ns=now_ns - 680 * S))
         self.state.apply(CameraHealthEvent(id="down-hall-ne", type="camera_down", camera="hall-ne",
                                            start_ns=now_ns - 130 * S, reason="stream closed by the camera"))
         self.state.apply(OverCapacity(id="oc-entrance", start_ns=now_ns - 180 * S, zone="entrance", capacity=8, peak=10))
-        self.state.apply(DistanceViolation(id="dv-1-2", start_ns=now_ns - 20 * S, tracks=[1, 2],
-                                           min_distance_m=1.2, limit_m=2.0))
+        self.state.apply(incident("inc-1-2", now_ns - 20 * S, [1, 2]))
         self.frames(now_ns, seq=0)
 
     def frames(self, t_ns: int, seq: int) -> None:
         for camera in UP_CAMERAS:
             self.state.apply(FrameHeader(camera=camera, seq=seq, capture_ns=t_ns, width=1024, height=1024))
+
+
+def incident(event_id: str, start_ns: int, people: list[int], end_ns: int | None = None, zone: str | None = None,
+             position: tuple[float, float] = (11.6, 3.0)) -> DistanceIncident:
+    """A distance incident of ``people`` (ongoing unless ``end_ns``), as the tracker publishes it."""
+    return DistanceIncident(id=event_id, start_ns=start_ns, end_ns=end_ns, zone=zone, tracks=people, people=len(people),
+                            current=[] if end_ns else people, min_distance_m=1.2, limit_m=2.0, position=position,
+                            last_active_ns=end_ns or start_ns, severity="low" if len(people) < 3 else "medium")
 
 
 class Feeder:

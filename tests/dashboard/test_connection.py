@@ -101,7 +101,7 @@ def test_banner_while_the_gateway_is_gone_then_live_again_after_a_restart(chromi
             # The restarted gateway no longer knows the first one's alert: it is not shown as ongoing.
             page.wait_for(f"{alert_node('oc-forgotten')}.dataset.active === 'false'", what="the forgotten alert")
             assert "no longer reported" in page.evaluate(f"{alert_node('oc-forgotten')}.textContent")
-            assert page.evaluate(f"{alert_node('dv-1-2')}.dataset.active") == "true"  # known to both
+            assert page.evaluate(f"{alert_node('inc-1-2')}.dataset.active") == "true"  # known to both
             time_before = page.evaluate("document.getElementById('clock').textContent")
             page.wait_for(f"document.getElementById('clock').textContent !== {time_before!r}", timeout_s=5, what="live ticks")
     finally:

@@ -29,10 +29,23 @@ class CameraCounts(BaseModel):
     unknown: int
 
 
+class Period(BaseModel):
+    start: str
+    end: str | None = Field(description="null while it lasts")
+    start_ns: int
+    end_ns: int | None
+    reasons: list[str]
+
+
 class Health(BaseModel):
     status: Status = Field(
-        description="no_data: no tracks yet; stale: no tracks for a while; degraded: a camera is down; ok otherwise"
+        description="no_data: no tracks yet; stale: no tracks for a while; degraded: the live data is incomplete or "
+        "late (see reasons); ok otherwise"
     )
+    reasons: list[str] = Field(default_factory=list, description="why the status is degraded: cameras down, behind or "
+                               "losing frames, tracks arriving late, ticks skipped")
+    degraded_periods: list[Period] = Field(default_factory=list, description="when the data was degraded, the last hour "
+                                           "(gateway clock), oldest first")
     site: str
     time: str
     uptime_s: float
@@ -49,12 +62,13 @@ def health(request: Request, state: StateDep) -> Health:
     cameras = [c.state for c in state.camera_health()]
     counts = CameraCounts(up=cameras.count("up"), down=cameras.count("down"), unknown=cameras.count("unknown"))
     age = state.tracks_age_s()
+    reasons, periods = state.degraded()
     status: Status
     if age is None:
         status = "no_data"
     elif age > STALE_AFTER_S:
         status = "stale"
-    elif counts.down:
+    elif counts.down or reasons:
         status = "degraded"
     else:
         status = "ok"
@@ -66,6 +80,9 @@ def health(request: Request, state: StateDep) -> Health:
         tracks_age_s=age,
         services=[ServiceStatus(name=s.name, instance=s.instance, since=iso_utc(s.since_ns)) for s in state.services()],
         cameras=counts,
+        reasons=reasons,
+        degraded_periods=[Period(start=iso_utc(p.start_ns), end=None if p.end_ns is None else iso_utc(p.end_ns),
+                                 start_ns=p.start_ns, end_ns=p.end_ns, reasons=p.reasons) for p in periods],
         ignored_messages=state.ignored,
         bus=None if (stats := getattr(request.app.state, "bus_stats", None)) is None else stats.snapshot(),
     )

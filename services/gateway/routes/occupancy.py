@@ -44,6 +44,7 @@ class OccupancyNow(BaseModel):
     time: str | None
     total: int
     capacity: int | None
+    crowded_level: int | None = Field(default=None, description="count from which the whole site is crowded")
     level: Level
     zones: list[ZoneNow]
 
@@ -69,9 +70,8 @@ def level_of(count: int, crowded_level: int | None, capacity: int | None) -> Lev
 
 
 def site_crowded_level(site: Site) -> int | None:
-    """The site's crowded level: 80 % of the site capacity, like a zone's default."""
-    cap = site.thresholds.site_capacity
-    return None if cap is None else max(1, int(0.8 * cap))
+    """The site's crowded level (``Site.crowded_level``)."""
+    return site.crowded_level
 
 
 @router.get("", response_model=OccupancyNow, summary="Occupancy now, site and per zone")
@@ -98,7 +98,8 @@ def occupancy_now(state: StateDep) -> OccupancyNow:
         time=iso_utc(latest.time_ns) if latest else None,
         total=total,
         capacity=capacity,
-        level=level_of(total, site_crowded_level(site), capacity),
+        crowded_level=site.crowded_level,
+        level=level_of(total, site.crowded_level, capacity),
         zones=zones,
     )
 

@@ -1,15 +1,14 @@
 """Every analytic of a site behind one call per tick, for the tracker service.
 
 ``SiteAnalytics.update`` checks the tick's positions, finds each person's zones once, and hands
-them to the distance monitor (whose pair violations the incident tracker groups), the occupancy counter, the crowded-interval trackers and the
-trajectory history. Crowded intervals are tracked for each zone with a crowded level
-(``Zone.effective_crowded_level``) and for the site as a whole when it has a capacity, at 80 % of
-it (the same default a zone uses).
+them to the distance monitor (whose pair violations the incident tracker groups), the occupancy
+counter, the crowded-interval trackers and the trajectory history. Crowded intervals are tracked for each zone with a crowded level
+(``Zone.effective_crowded_level``) and for the site as a whole when it has a capacity
+(``Site.crowded_level``, the same default share a zone uses).
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -78,9 +77,8 @@ class SiteAnalytics:
         self.occupancy = OccupancyCounter(site.site, site.zones, th)
         gap, shortest = seconds_to_ns(crowded_gap_s), seconds_to_ns(crowded_min_duration_s)
         self.crowding: list[tuple[int, CrowdedIntervalTracker]] = []  # (zone column or -1 for the site, tracker)
-        if th.site_capacity is not None:
-            level = max(1, math.floor(0.8 * th.site_capacity))
-            self.crowding.append((-1, CrowdedIntervalTracker(level, gap, shortest, zone=None)))
+        if site.crowded_level is not None:
+            self.crowding.append((-1, CrowdedIntervalTracker(site.crowded_level, gap, shortest, zone=None)))
         for z, zone in enumerate(site.zones):
             if zone.effective_crowded_level is not None:
                 self.crowding.append((z, CrowdedIntervalTracker(zone.effective_crowded_level, gap, shortest, zone.id)))

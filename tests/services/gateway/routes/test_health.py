@@ -32,3 +32,15 @@ def test_health_counts_ignored_messages(client: TestClient, state: GatewayState)
     state.apply(tracks(T0, {}).model_copy(update={"site": "other"}))
     body = client.get("/api/health").json()
     assert (body["ignored_messages"], body["site"], body["bus"]) == (1, "hall", None)
+
+
+def test_health_says_why_the_data_is_degraded_and_since_when(client: TestClient, state: GatewayState,
+                                                              clock: FakeClock) -> None:
+    state.apply(tracks(T0, {1: (0.0, 0.0)}))
+    assert client.get("/api/health").json()["reasons"] == []
+    clock.advance(4.0)
+    state.apply(tracks(T0 + 500_000_000, {1: (0.0, 0.0)}))  # captured half a second later, arrived 4 s later
+    body = client.get("/api/health").json()
+    assert body["status"] == "degraded"
+    assert body["reasons"] == ["tracks arrive 3.5 s after capture: the tracker or detector is behind"]
+    assert [(p["start"], p["end"]) for p in body["degraded_periods"]] == [("2023-11-14T22:13:24.000Z", None)]
