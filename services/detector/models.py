@@ -72,8 +72,8 @@ class CameraModels:
 
         def named(name: str | Path) -> Detector | RimTileDetector:
             if str(name) == RIM_TILES:
-                if not tiles:
-                    tiles.append(RimTileDetector(load(TILE_MODEL, threads, **options)))
+                if not tiles:  # YOLOX-nano on the tiles, the shipped general model under the camera
+                    tiles.append(RimTileDetector(load(TILE_MODEL, threads, **options), centre=named(DEFAULT_MODEL)))
                 return tiles[0]
             path = resolve_model(name, site_dir).resolve()
             if path not in by_path:

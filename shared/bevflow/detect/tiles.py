@@ -13,14 +13,16 @@ Tiles overlap. A box touching a tile's left or right edge is a person cut by it,
 neighbouring tile holds whole (a tile reaches further than half the angle to its neighbours at
 every radius inside the circle), so such boxes are dropped; the rest are merged by rotated NMS.
 
-People right under the camera are seen from above, which photographs hardly show; ``centre``
-(optional) is a second detector for them, run on the frame at its usual scale, whose boxes are
-kept within ``centre_share`` of the circle's radius and the tiles' boxes outside it.
+People right under the camera are seen from above, which photographs hardly show and our renders
+show plenty of; ``centre`` (optional) is a second detector for them, run on the frame at its
+usual scale, whose boxes are kept within ``centre_share`` of the circle's radius and the tiles'
+boxes outside it.
 
 The layout (8 tiles of 0.8 × the radius from 0.1 × the radius out) suits ceilings of about 3 m,
 where people are large in the frame; ``load_rim_tiles`` builds the detector with the shipped
-YOLOX-nano (COCO, Apache-2.0: see the model card). On real frames it finds far more people than
-the shipped model trained on renders, at many times its cost (docs/RESULTS.md, "Real frames").
+YOLOX-nano (COCO, Apache-2.0: see the model card) on the tiles and the shipped render-trained
+model within 0.3 × the radius. On real frames it finds far more people than the shipped model
+alone, at many times its cost (docs/RESULTS.md, "Real frames").
 """
 
 from __future__ import annotations
@@ -126,10 +128,12 @@ TILE_MODEL = Path(__file__).resolve().parent.parent / "data" / "models" / "yolox
 
 
 def load_rim_tiles(threads: int = 2, score_threshold: float = 0.4, tile_model: str | Path | None = None) -> RimTileDetector:
-    """The rim-tile detector with the shipped YOLOX-nano (or ``tile_model``) on every tile."""
+    """The rim-tile detector with the shipped YOLOX-nano (or ``tile_model``) on every tile and
+    the shipped general model for the people right under the camera."""
     from bevflow.detect.runtime import Detector  # onnxruntime is imported only when a model loads
 
-    return RimTileDetector(Detector(tile_model or TILE_MODEL, threads=threads, score_threshold=score_threshold))
+    tiles = Detector(tile_model or TILE_MODEL, threads=threads, score_threshold=score_threshold)
+    return RimTileDetector(tiles, centre=Detector(None, threads=threads, score_threshold=score_threshold))
 
 
 def rotated_nms(rotated: FloatArray, scores: FloatArray, iou_threshold: float) -> NDArray[np.int64]:

@@ -131,4 +131,5 @@ def test_rim_tiles_names_the_rotation_aware_detector_shared_by_the_cameras_askin
     models = CameraModels(site, site_dir=tmp_path, default="rim-tiles", load=FakeTileDetector)
     assert isinstance(models["own"], RimTileDetector) and models["own"] is models["low"]
     assert models["own"].tile_detector.model_path == TILE_MODEL
+    assert models["own"].centre.model_path == DEFAULT_MODEL.resolve()
     assert models.models()["own"] == "rim-tiles"
