@@ -14,6 +14,8 @@ import json
 import math
 from pathlib import Path
 
+from bevflow.detect.tiles import RIM_TILES, load_rim_tiles
+
 from bevflow_services.cli import UserError
 
 
@@ -47,14 +49,13 @@ def _check(args: argparse.Namespace) -> None:
         raise UserError(f"--scale must be a number > 0, got {args.scale}")
     if args.threads <= 0:
         raise UserError(f"--threads must be positive, got {args.threads}")
-    if str(args.model) == "rim-tiles" and args.scale is not None:
+    if str(args.model) == RIM_TILES and args.scale is not None:
         raise UserError("--model rim-tiles sizes its tiles from the focal length: give --camera-height and --focal, or neither, not --scale")
 
 
 def run_detector_evaluation(args: argparse.Namespace) -> int:
     from bevflow.detect.coco import CocoError
     from bevflow.detect.runtime import Detector, DetectorError
-    from bevflow.detect.tiles import RIM_TILES, load_rim_tiles
     from bevflow.evaluation.detector import detect_frames, score_frames
     from bevflow.evaluation.drawing import write_drawings
 
@@ -79,6 +80,9 @@ def run_detector_evaluation(args: argparse.Namespace) -> int:
           f"recall {scores.recall:.3f}  F1 {scores.F1:.3f}  (score >= {scores.threshold:.3f})")  # fmt: skip
     if drawn:
         print(f"drew {len(drawn)} frames into {args.draw}")
+    if str(args.model) != RIM_TILES and any(r.setup.assumed is not None for r in results):
+        print("note: the shipped model has only seen renders; on real frames of low ceilings --model rim-tiles "
+              "finds far more people, at many times the cost (docs/RESULTS.md, 'Real frames')")  # fmt: skip
     if args.json is not None:
         try:
             args.json.write_text(json.dumps(scores.as_dict(), indent=2) + "\n")
