@@ -224,6 +224,14 @@ async function boot() {
     chart.setScope(scope || null, chartLimits.get(scope) || { capacity: null, crowded: null });
   });
   setUpView3d(config.view3d_url);
+  const tz = Intl.DateTimeFormat().resolvedOptions().timeZone || "UTC"; // the report's day is the control room's
+  for (const link of document.querySelectorAll("#exports [data-report]")) link.href += `&tz=${encodeURIComponent(tz)}`;
+  const refreshExports = () => {
+    const since = Math.floor(Date.now() / 1000) - 86400;
+    for (const link of document.querySelectorAll("#exports [data-csv]")) link.href = `/api/history/${link.dataset.csv}?format=csv&limit=100000&since=${since}`;
+  };
+  refreshExports();
+  setInterval(refreshExports, 60000);
   document.addEventListener("keydown", (event) => event.key === "Escape" && panel.hide());
   debug.ready = true;
   document.body.dataset.ready = "true";

@@ -26,6 +26,7 @@ import bevflow_dashboard
 from bevflow.schemas import AlertMessage, Tracks
 from bevflow.site import Site
 
+from bevflow_services.gateway.api_docs import add_api_docs
 from bevflow_services.gateway.auth import Access, get_access, require_role
 from bevflow_services.gateway.auth_headers import add_security_middleware
 from bevflow_services.gateway.routes import acknowledge, alerts, cameras, health, intervals, occupancy, streams, tracks
@@ -57,9 +58,10 @@ PLACEHOLDER = """<!doctype html>
 
 WEBSOCKETS_DOC = {
     "/ws/alerts": {
-        "description": "One AlertMessage per text frame, when an alert starts and again when it ends (same id).",
+        "description": "One AlertMessage per text frame, when an alert starts, again when it changes or ends (same id).",
         "query": {
-            "types": "comma-separated alert types to receive (default: all)",
+            "types": "comma-separated alert types to receive (default: all but distance_violation, the per-pair "
+                     "events that distance_incident groups)",
             "zones": "comma-separated zone ids to receive (default: all, including site-wide alerts)",
             "replay": "'active' to first receive the alerts already ongoing (default: 'none')",
         },
@@ -129,6 +131,8 @@ def create_app(
             "see `x-websockets`."
         ),
         lifespan=lifespan,
+        docs_url=None,  # served from local assets by add_api_docs
+        redoc_url=None,
     )
     app.state.gateway = state
     app.state.view3d_port = None
@@ -148,6 +152,7 @@ def create_app(
         app.include_router(module.router)
     app.add_exception_handler(RequestValidationError, _validation_error)
     add_security_middleware(app, access.cors_origins, hsts=access.secure_cookies)
+    add_api_docs(app, app.title)
     _serve_dashboard(app, dashboard)
     app.openapi = lambda: _openapi(app)  # type: ignore[method-assign]
     return app

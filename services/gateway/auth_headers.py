@@ -2,8 +2,9 @@
 
 The dashboard is ES modules and a stylesheet from this origin, with no inline script or style
 attribute, so its policy allows scripts, styles, fetches and websockets from ``'self'`` only, and
-frames from ``'self'`` and the 3D view's port. ``/docs`` (Swagger UI) loads its script from a CDN
-and runs an inline one, so it gets a policy of its own. No page may be framed by another site.
+frames from ``'self'`` and the 3D view's port. ``/docs`` (Swagger UI) and ``/redoc`` load their
+bundles from the gateway (``api_docs``) but run an inline script, and ReDoc sets inline styles and
+starts a worker from a blob, so they get a policy of their own. No page may be framed by another site.
 """
 
 from __future__ import annotations
@@ -17,17 +18,18 @@ from starlette.middleware.cors import CORSMiddleware
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 DOCS_PATHS = ("/docs", "/redoc")
-DOCS_CDN = "https://cdn.jsdelivr.net"
 SAFE_HOST = re.compile(r"^[A-Za-z0-9.\-]+$|^\[[0-9A-Fa-f:.]+\]$")
 
 
-def content_security_policy(path: str, frame_origin: str | None) -> str:
-    """The CSP for a response to ``path``; ``frame_origin`` is where the 3D view is served, if on."""
+def content_security_policy(path: str, frame_origin: str | None, style_hashes: Sequence[str] = ()) -> str:
+    """The CSP for a response to ``path``; ``frame_origin`` is where the 3D view is served, if on;
+    ``style_hashes`` ("sha256-...") are the inline stylesheets a page may have."""
     if path.startswith(DOCS_PATHS):
-        return (f"default-src 'self'; script-src 'self' 'unsafe-inline' {DOCS_CDN}; style-src 'self' {DOCS_CDN}; "
-                "img-src 'self' data: https://fastapi.tiangolo.com; frame-ancestors 'none'; object-src 'none'")
+        return ("default-src 'self'; script-src 'self' 'unsafe-inline'; style-src 'self' 'unsafe-inline'; "
+                "img-src 'self' data:; worker-src 'self' blob:; frame-ancestors 'none'; object-src 'none'")
     frames = "'self'" + (f" {frame_origin}" if frame_origin else "")
-    return ("default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' data: blob:; "
+    styles = "".join(f" '{h}'" for h in style_hashes)
+    return (f"default-src 'self'; script-src 'self'; style-src 'self'{styles}; img-src 'self' data: blob:; "
             f"connect-src 'self'; frame-src {frames}; object-src 'none'; base-uri 'self'; form-action 'self'; "
             "frame-ancestors 'none'")
 

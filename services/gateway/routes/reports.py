@@ -17,9 +17,10 @@ from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 from fastapi import APIRouter, HTTPException, Query
 from fastapi.responses import HTMLResponse, Response
 
+from bevflow_services.gateway.auth_headers import content_security_policy
 from bevflow_services.gateway.daily_report import DailyReport, build_daily_report
 from bevflow_services.gateway.params import NS, StateDep
-from bevflow_services.gateway.report_render import render_html, render_pdf
+from bevflow_services.gateway.report_render import STYLE_HASH, render_html, render_pdf
 
 router = APIRouter(prefix="/api/reports", tags=["reports"])
 
@@ -51,8 +52,9 @@ def daily_report(state: StateDep, day: DateParam = None, tz: TimezoneParam = "UT
     if not FIRST_DAY <= day <= LAST_DAY:  # capture times are int64 nanoseconds since 1970
         raise HTTPException(400, f"date: {day.isoformat()} is outside {FIRST_DAY} to {LAST_DAY}")
     report = build_daily_report(state.site, state.history, day, zone, tz)
-    if fmt == "html":
-        return HTMLResponse(render_html(report, zone))
+    if fmt == "html":  # the gateway's policy, plus the report's own stylesheet
+        policy = content_security_policy("/api/reports/daily", None, style_hashes=[STYLE_HASH])
+        return HTMLResponse(render_html(report, zone), headers={"Content-Security-Policy": policy})
     if fmt == "pdf":
         name = re.sub(r"[^A-Za-z0-9_.-]", "_", f"report-{state.site.site}-{report.date}")
         return Response(render_pdf(report, zone), media_type="application/pdf",

@@ -37,10 +37,15 @@ def test_the_3d_view_may_be_framed_from_its_own_port() -> None:
     assert "frame-src 'self';" in content_security_policy("/", None)
 
 
-def test_the_api_docs_get_a_policy_that_lets_swagger_load(secured) -> None:
+def test_the_api_docs_get_a_policy_that_lets_swagger_load_from_the_gateway_only(secured) -> None:
     client, _ = secured
-    policy = client.get("/docs").headers["content-security-policy"]
-    assert "https://cdn.jsdelivr.net" in policy and "frame-ancestors 'none'" in policy
+    page = client.get("/docs")
+    policy = page.headers["content-security-policy"]
+    assert "http" not in policy and "frame-ancestors 'none'" in policy  # no other origin at all
+    assert "http" not in page.text.replace('"/openapi.json"', "")  # every asset from the gateway
+    for path in ("/docs-assets/swagger-ui-bundle.js", "/docs-assets/swagger-ui.css", "/docs-assets/redoc.standalone.js"):
+        assert path.split("/")[-1] in page.text + client.get("/redoc").text
+        assert client.get(path).status_code == 200
 
 
 @pytest.mark.parametrize(

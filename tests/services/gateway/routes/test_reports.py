@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import base64
+import hashlib
 import re
 import zlib
 from collections.abc import Iterator
@@ -100,6 +101,17 @@ def test_the_html_report_has_both_charts_and_every_table(day: History) -> None:
         assert f"<h2>{title}</h2>" in page
     assert "<td>Gate</td><td>4</td><td>01:31:00</td>" in page
     assert "4 distance violations, lasting 5 s on average" in page
+
+
+def test_the_html_report_is_styled_under_the_gateways_policy(day: History) -> None:
+    """No style attribute (the charts use SVG presentation attributes) and one stylesheet, allowed by its hash."""
+    response = day.client.get("/api/reports/daily?date=2023-11-15&format=html")
+    policy, page = response.headers["content-security-policy"], response.text
+    assert " style=" not in page and page.count("<style>") == 1
+    style = page.split("<style>")[1].split("</style>")[0]
+    digest = base64.b64encode(hashlib.sha256(style.encode()).digest()).decode()
+    assert f"style-src 'self' 'sha256-{digest}';" in policy and "script-src 'self';" in policy
+    assert 'fill="rgb(' in page  # the charts keep their colours
 
 
 def pdf_text(pdf: bytes) -> bytes:
