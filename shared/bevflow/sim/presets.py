@@ -23,7 +23,9 @@ ceiling; shelves are 1.5–1.8 m, counters 1.1 m.
 
 ``demo_hall()`` is the live demo's default: a 40 × 25 m hall, nine ceiling fisheyes at 5.5 m with
 overlapping 8 m circles, three zones with capacities (gate, corridor, shop), pillars, shelves and
-counters, and about 50 people at a time, some in groups.
+counters, and about 50 people at a time, some in groups. A boarding surge brings 25 more people to
+queue at the gate from minute 1 to minute 4 of every ten, so the gate goes over capacity and the
+hall crowded, and both end again.
 
 >>> p = table1_sequence(6)
 >>> [c.height_m for c in p.site.cameras], p.scene.frames, p.scene.identities
@@ -40,6 +42,7 @@ import numpy as np
 
 from bevflow.camera import FisheyeCamera
 from bevflow.sim.scene import Door, GoalArea, Obstacles, Pillar, SceneConfig, Shelf
+from bevflow.sim.surge import Surge
 from bevflow.sim.views import CameraRig
 from bevflow.site import CameraConfig, Intrinsics, Pose, Site, Thresholds, Zone
 
@@ -155,8 +158,9 @@ def table1(seed: int | None = None) -> list[Preset]:
     return [table1_sequence(n, seed) for n in TABLE1]
 
 
-def demo_hall(seed: int = 0, people: int = 50, frames: int | None = None) -> Preset:
-    """A 40 × 25 m hall watched by nine 5.5 m fisheyes; ``frames`` None runs forever."""
+def demo_hall(seed: int = 0, people: int = 50, frames: int | None = None, surge: bool = True) -> Preset:
+    """A 40 × 25 m hall watched by nine 5.5 m fisheyes; ``frames`` None runs forever; ``surge``
+    False leaves out the boarding surge at the gate."""
     floor = (0.0, 0.0, 40.0, 25.0)
     xs, ys = (40.0 / 6, 20.0, 40.0 - 40.0 / 6), (4.2, 12.5, 20.8)
     cameras = [
@@ -197,6 +201,7 @@ def demo_hall(seed: int = 0, people: int = 50, frames: int | None = None) -> Pre
         fps=FPS,
         frames=frames,
         seed=seed,
+        surges=(Surge(60.0, 240.0, tuple(zones[0].polygon), extra=people // 2, every_s=600.0, share=0.25),) if surge else (),
     )
     site = Site(site="demo-hall", cameras=cameras, zones=zones, floor=floor, thresholds=Thresholds(site_capacity=80))
     return Preset("demo-hall", site, scene)

@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 from scipy.sparse.csgraph import dijkstra
 
 from bevflow.sim.bodies import BodyPrimitives, BodyShape, Posture, pose_bodies
+from bevflow.sim.surge import Surge, extra_people, surge_area
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -106,6 +107,7 @@ class SceneConfig:
     fps: float = 10.0
     frames: int | None = 600
     seed: int = 0
+    surges: tuple[Surge, ...] = ()  # times when more people come in, all for one area (``bevflow.sim.surge``)
 
     def __post_init__(self) -> None:
         x0, y0, x1, y1 = self.floor
@@ -421,11 +423,13 @@ class Scene:
         self._next_pid, self._next_group = 1, 0
         self._away: list[tuple[float, int]] = []  # (back at time, identity)
         self._walkers: list[_Walker] = []
+        self._t = 0.0
         self._place_initial_crowd()
         dt = 1.0 / cfg.fps
         index = 0
         while cfg.frames is None or index < cfg.frames:
             t = index * dt
+            self._t = t
             if index:
                 self._step(t, dt)
             yield self._frame(index, t)
@@ -470,12 +474,13 @@ class Scene:
 
     def _spawn(self, t: float) -> None:
         present = len(self._walkers)
-        if present >= self.config.present_target or not self._doors_in:
+        target = self.config.present_target + extra_people(self.config.surges, t)
+        if present >= target or not self._doors_in:
             return
         door = self._doors_in[int(self._rng.integers(len(self._doors_in)))]
         if any(math.hypot(*(w.pos - door[0])) < 1.0 for w in self._walkers):
             return  # the doorway is busy: try again next frame
-        ids = self._take_identities(t, self._group_size(self.config.present_target - present))
+        ids = self._take_identities(t, self._group_size(target - present))
         if ids:
             self._start_visit(ids, door[0].copy(), inward=door[1])
 
@@ -506,6 +511,9 @@ class Scene:
 
     def _plan(self) -> list[tuple[str, object]]:
         rng, cfg = self._rng, self.config
+        surge = surge_area(cfg.surges, self._t)
+        if surge is not None and rng.random() < surge.share:
+            return self._surge_plan(surge)
         u = rng.random()
         long_stop = Posture.STANDING if u < cfg.standing_fraction else None
         if long_stop is None and u < cfg.standing_fraction + cfg.sitting_fraction:
@@ -519,6 +527,21 @@ class Scene:
                 plan.append(("dwell", (float(rng.uniform(20.0, 90.0)), long_stop)))
             elif rng.random() < cfg.dwell_probability:
                 plan.append(("dwell", (float(rng.uniform(1.5, 6.0)), Posture.STANDING)))
+        if self._doors_out:
+            plan.append(("exit", self._doors_out[int(rng.integers(len(self._doors_out)))][0]))
+        return plan
+
+    def _surge_plan(self, surge: Surge) -> list[tuple[str, object]]:
+        """A visit during a surge: straight to its area, a long stand there, then out."""
+        rng = self._rng
+        for _ in range(200):
+            pts = _sample_in_polygon(rng, np.asarray(surge.area, dtype=np.float64), 8)
+            pts = pts[self.navigator.is_free(pts, clearance=_ROUTE_CLEARANCE)]
+            if len(pts):
+                break
+        else:
+            raise ValueError("no free floor in the surge area")
+        plan: list[tuple[str, object]] = [("goal", pts[0]), ("dwell", (float(rng.uniform(*surge.stay_s)), Posture.STANDING))]
         if self._doors_out:
             plan.append(("exit", self._doors_out[int(rng.integers(len(self._doors_out)))][0]))
         return plan
