@@ -92,7 +92,9 @@ def test_fitting_only_near_the_reporting_radius_keeps_exactly_what_a_full_fit_ke
     reporting = site.cameras[0].reporting_radius_m
     kept = full.near(camera.center, reporting) & np.isfinite(full.xy).all(axis=1)
     result = Projector(site).project(message)
-    assert [c.xy for c in result.cylinders] == [pytest.approx(tuple(xy), abs=1e-9) for xy in full.xy[kept]]
+    # The same to a micrometre: the two lookup tables tile the floor from different origins, and
+    # OpenCV 5.1 projects a batch of points with rounding that depends on the batch (3e-8 m seen).
+    assert [c.xy for c in result.cylinders] == [pytest.approx(tuple(xy), abs=1e-6) for xy in full.xy[kept]]
     if radius is not None:  # a kept person's anchor lay past the radius, and most people were dropped
         anchor = camera.pixels_to_plane(box_anchor(camera, message.to_boxes()), 0.0)[:, :2]
         assert (np.linalg.norm(anchor[kept], axis=1) > reporting).any()
