@@ -17,6 +17,7 @@ export function renderDegraded(banner, detail, health) {
   const reasons = health.reasons || [];
   banner.hidden = reasons.length === 0;
   detail.textContent = reasons.join("; ");
+  banner.title = reasons.join("\n");
 }
 
 function badge(name, state, detail) {
