@@ -8,8 +8,9 @@ Camera results arrive on Zenoh threads, unsynchronised and sometimes late. They 
 ready ticks in time order and hands each to a ``TickHandler`` (``ticks.py``): the ``SiteTracker``
 steps with it, and a ``DriftMonitor`` compares overlapping cameras' estimates of the same people
 to raise a ``calibration_drift`` alert when a camera seems to have moved (``--no-drift`` turns that
-off). A camera silent for ``--camera-timeout`` seconds raises a ``camera_down`` alert, ended when
-it reports again.
+off). A camera silent for ``--camera-timeout`` seconds raises a ``camera_down`` alert, ended once
+it has reported again for ``--camera-up-after`` seconds without falling silent (a camera that keeps
+dropping out, on an overloaded machine, is one alert, not one per dropout).
 """
 
 from __future__ import annotations
@@ -44,6 +45,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        help="how long a tick waits for a late camera before it goes without it (default 150)")
     group.add_argument("--camera-timeout", type=float, default=5.0,
                        help="seconds of silence after which a camera is reported down (default 5)")
+    group.add_argument("--camera-up-after", type=float, default=10.0,
+                       help="seconds a camera reported down must report steadily before it counts as up again (default 10)")
     group.add_argument("--event-cache", type=int, default=10000,
                        help="recent alerts kept for a history recorder that restarts (default 10000)")
     group.add_argument("--first-id", type=int, default=1,
@@ -74,14 +77,19 @@ def drift_config(args: argparse.Namespace) -> DriftConfig | None:
 
 
 class CameraWatch:
-    """Per camera, when it last reported; ``check`` turns silences into down/up alerts."""
+    """Per camera, when it last reported; ``check`` turns silences into down/up alerts. A camera
+    that is down counts as up again once it has reported for ``up_after_ns`` without a silence."""
 
-    def __init__(self, cameras: list[str], timeout_ns: int, now_ns: int) -> None:
+    def __init__(self, cameras: list[str], timeout_ns: int, now_ns: int, up_after_ns: int = 0) -> None:
         self.timeout_ns = timeout_ns
+        self.up_after_ns = up_after_ns
         self.last_ns = dict.fromkeys(cameras, now_ns)
         self.down: dict[str, CameraHealthEvent] = {}
+        self.back_ns: dict[str, int] = {}  # down cameras reporting again: since when, without a silence
 
     def seen(self, camera: str, now_ns: int) -> None:
+        if camera in self.down and now_ns - self.last_ns[camera] > self.timeout_ns:
+            self.back_ns[camera] = now_ns  # back after a silence: the steady stretch starts now
         self.last_ns[camera] = now_ns
 
     def check(self, now_ns: int) -> list[CameraHealthEvent]:
@@ -93,11 +101,12 @@ class CameraWatch:
                     id=f"camera-{camera}-{last}", type="camera_down", camera=camera, start_ns=last,
                     reason=f"no results for {self.timeout_ns / 1e9:.0f} s")
                 events.append(self.down[camera])
-            elif not silent and camera in self.down:
-                ended = self.down.pop(camera).model_copy(update={"end_ns": last})
+            elif not silent and camera in self.down and now_ns - self.back_ns.get(camera, last) >= self.up_after_ns:
+                back = self.back_ns.pop(camera, last)
+                ended = self.down.pop(camera).model_copy(update={"end_ns": back})
                 events.append(ended)
                 events.append(CameraHealthEvent(id=f"{ended.id}-up", type="camera_up", camera=camera,
-                                                start_ns=last, end_ns=last))
+                                                start_ns=back, end_ns=back))
         return events
 
 
@@ -122,7 +131,7 @@ def main(args: argparse.Namespace) -> int:
     handler = TickHandler(site, tracker, drift_config(args))
     assembler: TickAssembler[CameraCylinders] = TickAssembler(
         site.camera_ids, period_ns=int(args.tick_ms * 1e6), max_wait_ns=int(args.max_wait_ms * 1e6))
-    watch = CameraWatch(site.camera_ids, int(args.camera_timeout * 1e9), time.time_ns())
+    watch = CameraWatch(site.camera_ids, int(args.camera_timeout * 1e9), time.time_ns(), int(args.camera_up_after * 1e9))
     lock = threading.Lock()
 
     def on_cylinders(message: CameraCylinders) -> None:  # on a Zenoh thread
