@@ -91,6 +91,9 @@ class DailyReport(BaseModel):
     violations: list[HourlyViolations]
     violation_count: int
     violation_mean_s: float | None = Field(description="mean duration of the violations that ended")
+    incidents: list[HourlyViolations] = Field(default_factory=list, description="distance incidents (people too close, "
+                                              "grouped) that opened in each hour, by zone")
+    incident_count: int = 0
     capacity_alerts: list[CapacityAlert]
     occupancy: OccupancyCurve
 
@@ -134,11 +137,12 @@ def _crowded(zone: str | None, times: np.ndarray, counts: np.ndarray, level: int
     return spans
 
 
-def _hourly(site: Site, events: list[Event], start_ns: int, hours: int) -> list[HourlyViolations]:
+def _hourly(site: Site, events: list[Event], start_ns: int, hours: int,
+            kind: str = "distance_violation") -> list[HourlyViolations]:
     names = {z.id: z.name or z.id for z in site.zones}
     counts: dict[str | None, np.ndarray] = {z.id: np.zeros(hours, dtype=np.int64) for z in site.zones}
     for event in events:
-        if event.type == "distance_violation" and start_ns <= event.start_ns < start_ns + hours * HOUR_NS:
+        if event.type == kind and start_ns <= event.start_ns < start_ns + hours * HOUR_NS:
             row = counts.setdefault(event.zone, np.zeros(hours, dtype=np.int64))
             row[(event.start_ns - start_ns) // HOUR_NS] += 1
     return [HourlyViolations(zone=z, name=names.get(z, "outside every zone") if z else "outside every zone",
@@ -178,6 +182,8 @@ def build_daily_report(site: Site, history: HistoryStore, day: date, zone_info: 
         start_ns=start_ns, end_ns=end_ns, samples=len(samples),
         peaks=peaks, crowded=crowded, hours=labels, violations=_hourly(site, events, start_ns, hours),
         violation_count=len(violations), violation_mean_s=float(np.mean(ended)) if ended else None,
+        incidents=_hourly(site, events, start_ns, hours, "distance_incident"),
+        incident_count=sum(1 for e in events if e.type == "distance_incident" and start_ns <= e.start_ns < end_ns),
         capacity_alerts=capacity,
         occupancy=OccupancyCurve(step_s=step_s, time_ns=curve.time_ns, total=curve.total, zones=curve.zones),
     )

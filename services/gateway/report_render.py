@@ -138,6 +138,8 @@ def tables(report: DailyReport, zone: tzinfo) -> dict[str, tuple[list[str], list
         "Crowded intervals": (["zone", "from", "to", "lasted", "peak"], [
             [names.get(c.zone, c.zone or "whole site"), local(c.start_ns, zone), local(c.end_ns, zone),
              duration(c.duration_s), str(c.peak)] for c in report.crowded]),
+        "Distance incidents by hour": (["zone", *[h[:2] for h in report.hours], "total"], [
+            [v.name, *[str(c) if c else "" for c in v.counts], str(v.total)] for v in report.incidents]),
         "Distance violations by hour": (["zone", *[h[:2] for h in report.hours], "total"], [
             [v.name, *[str(c) if c else "" for c in v.counts], str(v.total)] for v in report.violations]),
         "Over-capacity alerts": (["zone", "from", "to", "lasted", "peak", "capacity"], [
@@ -149,7 +151,8 @@ def tables(report: DailyReport, zone: tzinfo) -> dict[str, tuple[list[str], list
 
 def _summary(report: DailyReport) -> str:
     mean = "" if report.violation_mean_s is None else f", lasting {duration(report.violation_mean_s)} on average"
-    return (f"{report.violation_count} distance violations{mean}; {len(report.capacity_alerts)} over-capacity alerts; "
+    return (f"{report.incident_count} distance incidents (groups too close); "
+            f"{report.violation_count} distance violations between pairs{mean}; {len(report.capacity_alerts)} over-capacity alerts; "
             f"{len(report.crowded)} crowded intervals; {report.samples} occupancy samples.")
 
 

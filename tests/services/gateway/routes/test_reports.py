@@ -14,7 +14,7 @@ from fastapi.testclient import TestClient
 
 from bevflow.site import Site
 
-from tests.services.gateway.feed import S, FakeClock, occupancy, over_capacity, violation
+from tests.services.gateway.feed import S, FakeClock, incident, occupancy, over_capacity, violation
 from tests.services.gateway.routes.test_history import History, gateway_over
 
 H, MIN = 3600 * S, 60 * S
@@ -36,7 +36,8 @@ def day(request: pytest.FixtureRequest, site: Site, clock: FakeClock, tmp_path: 
                      violation("c", DAY + 13 * H + 20 * MIN, zone="shop"),
                      violation("d", DAY + 13 * H + 5 * MIN, zone=None, end_ns=DAY + 13 * H + 5 * MIN + 3 * S),
                      violation("e", DAY - S, zone="gate", end_ns=DAY + 5 * S),  # started the day before
-                     over_capacity("cap", DAY + 2 * H, zone=None, end_ns=DAY + 2 * H + 10 * MIN)]
+                     over_capacity("cap", DAY + 2 * H, zone=None, end_ns=DAY + 2 * H + 10 * MIN),
+                     incident("inc", DAY + H + 15 * MIN, zone="gate", end_ns=DAY + H + 16 * MIN)]
         history.feed(*messages)  # one commit, as the recorder would make
         yield history
 
@@ -100,7 +101,8 @@ def test_the_html_report_has_both_charts_and_every_table(day: History) -> None:
     for title in ("Peak occupancy", "Crowded intervals", "Distance violations by hour", "Over-capacity alerts"):
         assert f"<h2>{title}</h2>" in page
     assert "<td>Gate</td><td>4</td><td>01:31:00</td>" in page
-    assert "4 distance violations, lasting 5 s on average" in page
+    assert "1 distance incidents (groups too close); 4 distance violations between pairs, lasting 5 s on average" in page
+    assert "<h2>Distance incidents by hour</h2>" in page
 
 
 def test_the_html_report_is_styled_under_the_gateways_policy(day: History) -> None:
