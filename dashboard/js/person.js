@@ -92,12 +92,15 @@ export class PersonPanel {
   }
 
   renderContacts(contacts) {
-    this.contactsLimit.textContent = `(closer than ${metres(contacts.limit_m)})`;
+    this.contactsLimit.textContent = `(closer than ${metres(contacts.limit_m)}, the short ones left out)`;
+    const link = (id) => el("button", { type: "button", class: "track-link", onclick: () => this.onTrack(id) }, `#${id}`);
+    // One person the tracker lost and found again under new ids: every id, as one contact.
+    const ids = (contact) => (contact.tracks?.length > 1 ? contact.tracks : [contact.track]);
     const rows = contacts.contacts.map((contact) =>
       el(
         "tr",
         { "data-track": contact.track },
-        el("td", {}, el("button", { type: "button", class: "track-link", onclick: () => this.onTrack(contact.track) }, `#${contact.track}`)),
+        el("td", {}, ...ids(contact).flatMap((id, i) => (i ? [" → ", link(id)] : [link(id)]))),
         el("td", {}, metres(contact.min_distance_m)),
         el("td", {}, duration(contact.duration_s)),
         el("td", {}, clockTime(dateFromNs(contact.first_ns))),

@@ -287,6 +287,8 @@ class Contact(BaseModel):
     min_distance_m: Annotated[float, Field(ge=0, allow_inf_nan=False)]
     closest_ns: Annotated[int, Field(ge=0)]
     limit_m: Annotated[float, Field(gt=0, allow_inf_nan=False)]
+    tracks: list[int] = Field(default_factory=list, description="when the tracker lost the other person and found them "
+                              "again under new ids: every id of theirs merged into this contact, in order")
 
 
 # --- events --------------------------------------------------------------------------------------

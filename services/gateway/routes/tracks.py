@@ -7,6 +7,7 @@ from typing import Annotated
 from fastapi import APIRouter, HTTPException, Path, Query, Request
 from pydantic import BaseModel, Field
 
+from bevflow.analytics.fragments import TrackSpan, actionable, merge_fragments
 from bevflow.schemas import Contact, TrackState, TrajectoryPoint, iso_utc
 
 from bevflow_services.gateway.auth import AccessDep, Operator
@@ -108,7 +109,10 @@ def track_contacts(
     access: AccessDep,
     _: Operator,
     distance_m: Annotated[float | None, Query(gt=0, le=50, description="contact distance; default the social distance")] = None,
-    min_duration_s: Annotated[float, Query(ge=0, description="only contacts lasting at least this long")] = 0.0,
+    min_duration_s: Annotated[float | None, Query(ge=0, description="only contacts lasting at least this long; "
+                                                  "default the site's violation_min_duration_s, 0 for every contact")] = None,
+    merge: Annotated[bool, Query(description="join the fragments of one person the tracker lost and found again "
+                                 "under a new id (Contact.tracks lists them)")] = True,
 ) -> Contacts:
     """Tracing a person's contacts: needs the operator role, and is written to the audit log."""
     limit_m = distance_m or state.site.thresholds.social_distance_m
@@ -118,4 +122,18 @@ def track_contacts(
         if _current(state, track_id) is None:
             raise _unknown_track(track_id)
         found = []  # tracked now but not sampled yet
-    return Contacts(track=track_id, limit_m=limit_m, contacts=[c for c in found if c.duration_s >= min_duration_s])
+    if merge:
+        found = merge_fragments(found, _spans(state, [c.track for c in found]))
+    shortest = state.site.thresholds.violation_min_duration_s if min_duration_s is None else min_duration_s
+    return Contacts(track=track_id, limit_m=limit_m, contacts=actionable(found, shortest))
+
+
+def _spans(state: StateDep, track_ids: list[int]) -> dict[int, TrackSpan]:
+    """When and where each of ``track_ids`` was first and last seen, from the history."""
+    spans = {}
+    for track in track_ids:
+        path = state.history.trajectory(track)
+        if path is not None and len(path):
+            first, last = path.xy[0].tolist(), path.xy[-1].tolist()
+            spans[track] = TrackSpan(int(path.times_ns[0]), int(path.times_ns[-1]), (first[0], first[1]), (last[0], last[1]))
+    return spans

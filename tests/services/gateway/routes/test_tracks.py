@@ -56,7 +56,7 @@ def test_a_track_that_left_keeps_its_trajectory(client: TestClient, state: Gatew
 
 def test_contacts_of_a_track(client: TestClient, state: GatewayState) -> None:
     _walk(state)
-    body = client.get("/api/tracks/1/contacts").json()
+    body = client.get("/api/tracks/1/contacts?min_duration_s=0").json()
     assert (body["track"], body["limit_m"]) == (1, 2.0)  # the site's social distance by default
     # Track 2 is closer than 2 m from k = 4 (1.0 m) on; held until the next sample, so 1 s of contact.
     assert [(c["track"], (c["first_ns"] - T0) // S, c["min_distance_m"], c["duration_s"]) for c in body["contacts"]] == [(2, 4, 0.5, 1.0)]
@@ -64,7 +64,8 @@ def test_contacts_of_a_track(client: TestClient, state: GatewayState) -> None:
 
 @pytest.mark.parametrize(
     ("query", "tracks_in_contact"),
-    [("distance_m=3.5", [2]), ("distance_m=30", [2, 3]), ("distance_m=0.4", []), ("min_duration_s=2", []), ("until=1700000003", [])],
+    [("distance_m=3.5&min_duration_s=0", [2]), ("distance_m=30&min_duration_s=0", [2, 3]), ("distance_m=0.4&min_duration_s=0", []),
+     ("min_duration_s=2", []), ("", []), ("until=1700000003&min_duration_s=0", [])],  # default: the site's 2 s minimum
 )
 def test_contacts_filters(client: TestClient, state: GatewayState, query: str, tracks_in_contact: list[int]) -> None:
     _walk(state)
@@ -78,3 +79,14 @@ def test_an_unknown_track_is_404_naming_it(client: TestClient, state: GatewaySta
     response = client.get(path)
     assert response.status_code == 404
     assert "track 42" in response.json()["detail"]
+
+
+def test_contacts_join_the_fragments_of_one_person_found_again_under_a_new_id(client: TestClient, state: GatewayState) -> None:
+    """Person 5 stands 1 m from track 1 for 4 s, is lost, and comes back as 6 at the same place."""
+    for k in range(10):
+        people = {1: (0.0, 0.0), **({5: (1.0, 0.0)} if k < 4 else {6: (1.1, 0.1)} if k > 4 else {})}
+        state.apply(tracks(T0 + k * S, people))
+    merged = client.get("/api/tracks/1/contacts").json()["contacts"]
+    assert [(c["track"], c["tracks"], c["duration_s"]) for c in merged] == [(5, [5, 6], 8.0)]
+    apart = client.get("/api/tracks/1/contacts?merge=false").json()["contacts"]
+    assert [(c["track"], c["duration_s"]) for c in apart] == [(5, 4.0), (6, 4.0)]
