@@ -196,7 +196,7 @@ async function boot() {
   every(
     HEALTH_MS,
     polled(async () => {
-      const [health, cameras] = await Promise.all([getJson("/api/health"), getJson("/api/cameras")]);
+      const [health, { items: cameras }] = await Promise.all([getJson("/api/health"), getJson("/api/cameras?limit=1000")]);
       if (monitor.live) renderStatus($("system-status"), health.status, health.reasons);
       renderDegraded($("degraded-banner"), $("degraded-detail"), health);
       chart.setDegraded(health.degraded_periods);

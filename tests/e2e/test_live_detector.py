@@ -118,7 +118,7 @@ def test_rest_occupancy_follows_the_ground_truth_with_the_detector_in_the_loop(l
     assert max(abs(e) for e in errors) <= 3, errors
     assert abs(sum(errors) / len(errors)) <= 1.5, errors
     assert max(counted) >= 3  # people were there to be counted
-    cameras = {c["id"]: c for c in get_json(f"{base}/api/cameras")}
+    cameras = {c["id"]: c for c in get_json(f"{base}/api/cameras")["items"]}
     assert all(cameras[c]["frames_received"] > 0 for c in SERVED), cameras
 
 

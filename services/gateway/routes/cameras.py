@@ -11,7 +11,7 @@ from bevflow.schemas import iso_utc
 from bevflow.site import Site
 
 from bevflow_services.gateway.camera_health import CameraHealth
-from bevflow_services.gateway.params import StateDep
+from bevflow_services.gateway.params import Limit, Offset, Page, StateDep
 
 router = APIRouter(prefix="/api/cameras", tags=["cameras"])
 
@@ -52,9 +52,12 @@ def camera_status(site: Site, health: CameraHealth) -> CameraStatus:
     )
 
 
-@router.get("", response_model=list[CameraStatus], summary="Every camera, with its health")
-def cameras(state: StateDep) -> list[CameraStatus]:
-    return [camera_status(state.site, h) for h in state.camera_health()]
+@router.get("", response_model=Page[CameraStatus], summary="Every camera, with its health, in site order")
+def cameras(state: StateDep, limit: Limit = 100, offset: Offset = 0) -> Page[CameraStatus]:
+    """A page of ``{items, total, limit, offset}`` like every other list (a bare array before)."""
+    every = state.camera_health()
+    items = [camera_status(state.site, h) for h in every[offset : offset + limit]]
+    return Page[CameraStatus](items=items, total=len(every), limit=limit, offset=offset)
 
 
 @router.get("/{camera_id}", response_model=CameraStatus, summary="One camera, with its health")

@@ -12,7 +12,10 @@ def test_cameras_list_position_and_health(client: TestClient, state: GatewayStat
     for seq in (0, 1, 4):
         state.apply(Detections2D(camera="north", seq=seq, capture_ns=T0 + seq * S))
     clock.advance(1.5)
-    north, south = client.get("/api/cameras").json()
+    body = client.get("/api/cameras").json()
+    assert (body["total"], body["limit"], body["offset"]) == (2, 100, 0)
+    north, south = body["items"]
+    assert [c["id"] for c in client.get("/api/cameras?offset=1&limit=1").json()["items"]] == ["south"]
     assert (north["id"], north["model"], north["position"], north["monitored_radius_m"]) == ("north", "fisheye", [0.0, 0.0, 4.0], 6.0)
     assert (north["state"], north["frames_received"], north["frames_dropped"], north["last_seq"], north["age_s"]) == ("up", 3, 2, 4, 1.5)
     assert north["last_message"] == "2023-11-14T22:13:20.000Z"
