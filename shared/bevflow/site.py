@@ -180,6 +180,9 @@ class Thresholds(_Strict):
         default=60.0, description="an incident that ended shorter than this (and small) needs no acknowledgement")
     site_capacity: Annotated[int, Field(ge=0)] | None = None
     capacity_hysteresis: Annotated[int, Field(ge=0)] = 2
+    capacity_min_duration_s: Annotated[float, Field(ge=0)] = Field(
+        default=0.0, description="an over-capacity alert starts only once the count has stayed over capacity this long "
+        "(a count flickering across the limit for a second is not an alert)")
     track_activate_hits: Annotated[int, Field(ge=1)] = 3
     track_max_misses: Annotated[int, Field(ge=1)] = 5
     track_gate_m: PositiveFloat = 1.5

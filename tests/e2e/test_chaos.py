@@ -49,7 +49,7 @@ def chaos_site(folder: Path) -> Path:
     zones = [zone.model_copy(update={"capacity": 2, "crowded_level": 1}) for zone in site.zones]
     thresholds = site.thresholds.model_copy(update={
         "social_distance_m": 2.5, "violation_min_duration_s": 0.5, "group_walk_s": None, "group_after_s": None,
-        "capacity_hysteresis": 0})
+        "capacity_hysteresis": 0, "capacity_min_duration_s": 0.0})
     path = folder / "chaos-site.yaml"
     path.write_text(dump_site(site.model_copy(update={"site": "chaos", "zones": zones, "thresholds": thresholds})))
     return path

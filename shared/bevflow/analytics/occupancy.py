@@ -3,9 +3,10 @@
 The site count is the number of active tracks at the tick (the paper's rule); a zone's count is the
 number of those whose feet stand in its polygon (edge rule in ``bevflow.analytics.zones``).
 
-Over capacity starts at the first tick with count > capacity and ends at the first tick with
-count <= max(capacity - capacity_hysteresis, 0). A crowd hovering at the limit (49, 50, 51, 50,
-51, ...) therefore raises one alert, not one per step. ``peak`` is the highest count seen during
+Over capacity starts once the count has been > capacity at every tick for
+``capacity_min_duration_s`` (default 0: at the first such tick; ``start_ns`` is that first tick)
+and ends at the first tick with count <= max(capacity - capacity_hysteresis, 0). A crowd hovering
+at the limit (49, 50, 51, 50, 51, ...) therefore raises one alert, not one per step. ``peak`` is the highest count seen during
 the alert: the start event carries the count that started it, the end event the final peak.
 """
 
@@ -16,7 +17,7 @@ from dataclasses import dataclass
 
 from numpy.typing import ArrayLike
 
-from bevflow.analytics.positions import Clock, check_positions
+from bevflow.analytics.positions import Clock, check_positions, seconds_to_ns
 from bevflow.analytics.zones import BoolArray, ZoneIndex
 from bevflow.schemas import Occupancy, OverCapacity, ZoneOccupancy
 from bevflow.site import Thresholds, Zone
@@ -29,14 +30,21 @@ class _CapacityAlarm:
     zone: str | None
     capacity: int
     release: int
+    min_duration_ns: int = 0
     start_ns: int | None = None
     peak: int = 0
+    over_since: int | None = None  # first tick of the current stretch over capacity, before the alert starts
 
     def step(self, t: int, count: int) -> OverCapacity | None:
         if self.start_ns is None:
             if count <= self.capacity:
+                self.over_since = None
                 return None
-            self.start_ns, self.peak = t, count
+            self.over_since = t if self.over_since is None else self.over_since
+            self.peak = count if self.over_since == t else max(self.peak, count)
+            if t - self.over_since < self.min_duration_ns:
+                return None
+            self.start_ns, self.over_since = self.over_since, None
             return self.as_event(None, t)
         self.peak = max(self.peak, count)
         if count > self.release:
@@ -77,7 +85,8 @@ class OccupancyCounter:
         limits = [(-1, None, thresholds.site_capacity)] + [(z, zone.id, zone.capacity) for z, zone in enumerate(zones)]
         for column, zone_id, capacity in limits:
             if capacity is not None:
-                alarm = _CapacityAlarm(zone=zone_id, capacity=capacity, release=max(capacity - hysteresis, 0))
+                alarm = _CapacityAlarm(zone=zone_id, capacity=capacity, release=max(capacity - hysteresis, 0),
+                                       min_duration_ns=seconds_to_ns(thresholds.capacity_min_duration_s))
                 self._alarms.append((column, alarm))
         self._clock = Clock()
 

@@ -203,7 +203,7 @@ def demo_hall(seed: int = 0, people: int = 50, frames: int | None = None, surge:
         seed=seed,
         surges=(Surge(60.0, 240.0, tuple(zones[0].polygon), extra=people // 2, every_s=600.0, share=0.25),) if surge else (),
     )
-    site = Site(site="demo-hall", cameras=cameras, zones=zones, floor=floor, thresholds=Thresholds(site_capacity=80))
+    site = Site(site="demo-hall", cameras=cameras, zones=zones, floor=floor, thresholds=Thresholds(site_capacity=80, capacity_min_duration_s=5.0))
     return Preset("demo-hall", site, scene)
 
 

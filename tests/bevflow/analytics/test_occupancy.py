@@ -96,3 +96,21 @@ def test_given_membership_is_used_as_is() -> None:
     assert [z.count for z in occupancy.zones] == [3, 3]
     with pytest.raises(ValueError, match="shape"):
         counter.update(1, ids, xy, inside=inside[:, :1])
+
+
+@pytest.mark.parametrize(
+    ("counts", "expected"),
+    [
+        pytest.param([49, 51, 49, 51, 52, 49, 49], [], id="over for less than the minimum: no alert"),
+        pytest.param([49, 51, 53, 52, 47], [(3, None, 1, 53), (4, 4, 1, 53)], id="over long enough: starts at the first tick over"),
+        pytest.param([51, 52, 49, 51, 51, 51], [(5, None, 3, 51)], id="a dip below restarts the wait"),
+    ],
+)
+def test_over_capacity_waits_for_the_minimum_duration(counts: list[int], expected: list) -> None:
+    th = Thresholds(site_capacity=50, capacity_hysteresis=2, capacity_min_duration_s=2.0)
+    counter = OccupancyCounter("hall", [], th)
+    out = []
+    for k, n in enumerate(counts):
+        _, events = counter.update(k * S, *crowd(n))
+        out += [(k, None if e.end_ns is None else e.end_ns // S, e.start_ns // S, e.peak) for e in events]
+    assert out == expected
