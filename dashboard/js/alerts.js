@@ -20,15 +20,17 @@ export class AlertFeed {
   /**
    * @param {object} parts  list, empty, count, announcer (a live region for screen readers), showEnded (checkbox),
    *   held (the "n new" line shown while the feed holds still), ackAll (button)
-   * @param {object} options  site (id), zoneName(id), onTrack(trackId), onFocus(alert or null), onChange(feed)
+   * @param {object} options  site (id), zoneName(id), onTrack(trackId), onFocus(alert or null), onChange(feed),
+   *   onArrive(alert): an alert that just arrived live or changed
    */
-  constructor(parts, { site, zoneName, onTrack, onFocus = () => {}, onChange = () => {} }) {
+  constructor(parts, { site, zoneName, onTrack, onFocus = () => {}, onChange = () => {}, onArrive = () => {} }) {
     Object.assign(this, parts);
     this.site = site;
     this.zoneName = zoneName;
     this.onTrack = onTrack;
     this.onFocus = onFocus;
     this.onChange = onChange;
+    this.onArrive = onArrive;
     this.alerts = new Map();
     this.nodes = new Map();
     this.acknowledged = new Map();
@@ -69,6 +71,7 @@ export class AlertFeed {
     this.alerts.set(alert.id, { ...alert, isNew: isNew || Boolean(known?.isNew), seq, key, receivedMs: performance.now() });
     if (isNew) this.announcer.textContent = `New alert: ${alertLabel(alert.type)}${alert.zone ? `, ${this.zoneName(alert.zone)}` : ""}`;
     if (alert.type === "camera_up") this.endCameraDown(alert);
+    if (fresh) this.onArrive(this.alerts.get(alert.id));
     this.prune();
     this.render();
   }

@@ -6,10 +6,11 @@
 
 import { AlertFeed } from "./alerts.js";
 import { LiveSocket, every, getJson } from "./api.js";
+import { Notifier } from "./notify.js";
 import { OccupancyChart } from "./chart.js";
 import { ConnectionMonitor } from "./connection.js";
 import { el } from "./dom.js";
-import { clockTime, dateFromNs } from "./format.js";
+import { alertLabel, clockTime, dateFromNs } from "./format.js";
 import { renderCameras, renderDegraded, renderServices, renderStatus } from "./health.js";
 import { FloorMap } from "./map.js";
 import { occupancyFromTracks, renderOccupancy } from "./occupancy.js";
@@ -100,6 +101,7 @@ async function boot() {
       },
     },
   );
+  const notifier = new Notifier($("notify"));
   const feed = new AlertFeed(
     {
       list: $("alert-list"), empty: $("alerts-empty"), count: $("alerts-count"), announcer: $("alert-announcer"),
@@ -107,6 +109,10 @@ async function boot() {
     },
     {
       site: site.site, zoneName, onTrack: (id) => select(id), onChange: showAttention,
+      onArrive: (alert) => {
+        notifier.consider(alert, `${alertLabel(alert.type)}${alert.zone ? ` in ${zoneName(alert.zone)}` : ""}`);
+        debug.notified = notifier.count;
+      },
       onFocus: (alert) => {
         map.focusAlert(alert);
         debug.focused = alert ? alert.id : null;

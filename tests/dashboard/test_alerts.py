@@ -142,3 +142,24 @@ def test_the_feed_holds_still_under_the_pointer(page: Page, gateway: LiveGateway
     page.wait_for("document.querySelector('#alert-list li').dataset.id === 'inc-while-hovered'", timeout_s=5,
                   what="the held incident on top once the pointer left")
     assert page.evaluate("document.getElementById('alerts-held').hidden") is True
+
+
+def test_notifications_are_off_by_default_and_come_once_per_urgent_alert(page: Page, gateway: LiveGateway) -> None:
+    page.wait_for(alert_node("inc-earlier"), what="the stored alerts")
+    assert page.evaluate("document.getElementById('notify').checked") is False
+    gateway.scene.state.apply(OverCapacity(id="oc-quiet", start_ns=time.time_ns(), zone="gate-a", capacity=15, peak=16))
+    page.wait_for(alert_node("oc-quiet"), timeout_s=5, what="an alert while notifications are off")
+    assert not page.evaluate("window.bevflow.notified")
+
+    page.click("#notify")
+    try:
+        start = time.time_ns()
+        loud = OverCapacity(id="oc-loud", start_ns=start, zone="gate-a", capacity=15, peak=17)
+        gateway.scene.state.apply(loud)
+        gateway.scene.state.apply(incident("inc-small", start, [30, 31]))  # low severity: no notification
+        gateway.scene.state.apply(loud.model_copy(update={"peak": 19}))  # the same alert again: no second one
+        gateway.scene.state.apply(OverCapacity(id="oc-last", start_ns=start, zone="entrance", capacity=8, peak=9))
+        page.wait_for(alert_node("oc-last"), timeout_s=5, what="the alerts")
+        assert page.evaluate("window.bevflow.notified") == 2  # oc-loud and oc-last
+    finally:
+        page.click("#notify")  # the setting is per browser: leave it off for the other tests
