@@ -37,11 +37,12 @@ KEEP_LOWER = "CASE WHEN excluded.{c} < {t}.{c} THEN excluded.{c} ELSE {t}.{c} EN
 
 UPSERT_OCCUPANCY = ("INSERT INTO occupancy (time_ns, zone, people) VALUES (?, ?, ?) ON CONFLICT (time_ns, zone) "
                     "DO UPDATE SET people = " + KEEP_HIGHER.format(c="people", t="occupancy"))
-# An alert row changes only from active to ended: a replayed start never reopens an ended alert.
+# An alert row changes only while it is active (an incident's people change, then it ends): a
+# replayed start never reopens an ended alert.
 UPSERT_EVENT = (
     "INSERT INTO events (id, type, zone, start_ns, end_ns, body, recorded_ns) VALUES (?, ?, ?, ?, ?, ?, ?) "
     "ON CONFLICT (id) DO UPDATE SET zone = excluded.zone, end_ns = excluded.end_ns, body = excluded.body, "
-    "recorded_ns = excluded.recorded_ns WHERE events.end_ns IS NULL AND excluded.end_ns IS NOT NULL"
+    "recorded_ns = excluded.recorded_ns WHERE events.end_ns IS NULL"
 )
 INSERT_EVENT_TRACK = "INSERT INTO event_tracks (track_id, event_id) VALUES (?, ?) ON CONFLICT DO NOTHING"
 INSERT_POINT = "INSERT INTO track_points (track_id, time_ns, x, y) VALUES (?, ?, ?, ?) ON CONFLICT DO NOTHING"

@@ -232,3 +232,15 @@ def test_values_beyond_64_bits_match_nothing_instead_of_failing(alerts: HistoryD
     write(alerts, occupancy(T0, 1))
     assert alerts.occupancy_steps(-huge, huge, 60, huge)[1] == 1
     assert alerts.track_summaries(since_ns=-huge, until_ns=huge, offset=huge) == ([], 0)
+
+
+def test_an_incident_keeps_its_latest_people_until_it_ends(db: HistoryDatabase) -> None:
+    from tests.services.gateway.feed import incident
+
+    write(db, incident("i1", T0, people=(1, 2)))
+    write(db, incident("i1", T0, people=(1, 2, 3)))  # its people changed while it was open
+    assert [e.tracks for e in db.events(EventFilter(), 10)[0]] == [[1, 2, 3]]
+    write(db, incident("i1", T0, people=(1, 2, 3, 4), end_ns=T0 + 40 * S))
+    write(db, incident("i1", T0, people=(1, 2)))  # a replayed older message never reopens it
+    (stored,) = db.events(EventFilter(), 10)[0]
+    assert (stored.end_ns, stored.tracks) == (T0 + 40 * S, [1, 2, 3, 4])
