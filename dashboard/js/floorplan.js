@@ -133,21 +133,21 @@ export function drawScaleBar(ctx, view, colors) {
   const [left, bottom] = view.toScreen(view.extent[0], view.extent[1]);
   const x = left + 14;
   const y = bottom - 12;
-  ctx.fillStyle = withAlpha(colors.floor, 0.85);
-  ctx.fillRect(x - 8, y - 22, pixels + 16, 30);
-  ctx.strokeStyle = colors.text;
-  ctx.lineWidth = 2;
-  ctx.beginPath();
-  ctx.moveTo(x, y - 5);
-  ctx.lineTo(x, y);
-  ctx.lineTo(x + pixels, y);
-  ctx.lineTo(x + pixels, y - 5);
-  ctx.stroke();
-  ctx.fillStyle = colors.text;
+  // No box behind it: a zone in that corner stays visible; a halo keeps the bar readable on it.
+  for (const [color, width] of [[colors.floor, 5], [colors.text, 2]]) {
+    ctx.strokeStyle = color;
+    ctx.lineWidth = width;
+    ctx.beginPath();
+    ctx.moveTo(x, y - 5);
+    ctx.lineTo(x, y);
+    ctx.lineTo(x + pixels, y);
+    ctx.lineTo(x + pixels, y - 5);
+    ctx.stroke();
+  }
   ctx.font = "600 11px system-ui, sans-serif";
   ctx.textAlign = "center";
   ctx.textBaseline = "bottom";
-  ctx.fillText(`${label(length)} m`, x + pixels / 2, y - 4);
+  outlinedText(ctx, `${label(length)} m`, x + pixels / 2, y - 4, colors.text, colors.floor);
 }
 
 /** A one-line warning across the top of the map. */
