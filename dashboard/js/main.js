@@ -133,6 +133,7 @@ async function boot() {
   let peopleListAt = -Infinity;
   let limits = null; // /api/occupancy: capacities and crowded levels
   let panelSignature = "";
+  const trends = new Map(); // zone id -> counts of the last 10 minutes, from the history poll
   /** The occupancy panel and the zone colours from the tick the map draws. */
   function showOccupancy(tracks) {
     if (!limits) return;
@@ -142,7 +143,7 @@ async function boot() {
     const signature = JSON.stringify([now.total, now.zones.map((z) => z.count)]);
     if (signature === panelSignature) return;
     panelSignature = signature;
-    renderOccupancy($("occupancy-site"), $("zone-bars"), now, now.crowded_level);
+    renderOccupancy($("occupancy-site"), $("zone-bars"), now, now.crowded_level, trends);
     map.setZoneLevels(now.zones);
   }
   const tracksSocket = new LiveSocket("/ws/tracks", {
@@ -220,6 +221,8 @@ async function boot() {
         getJson("/api/intervals?last_s=3600"),
       ]);
       chart.setData(history, intervals.items, latestNs);
+      for (const [zone, counts] of Object.entries(history.zones)) trends.set(zone, counts.slice(-60));
+      panelSignature = ""; // redraw the panel with the new trends on the next tick
     }),
   );
   setInterval(() => feed.render(), 1000); // "ongoing for ..." durations

@@ -54,8 +54,32 @@ export function occupancyFromTracks(tracks, limits) {
   };
 }
 
-/** Render an /api/occupancy-shaped view into the site line and the zone list. */
-export function renderOccupancy(siteNode, zonesNode, now, crowdedLevelOfSite) {
+const SVG = "http://www.w3.org/2000/svg";
+
+/** A small line of the last minutes of a zone's counts (an SVG with presentation attributes only). */
+function sparkline(values) {
+  const svg = document.createElementNS(SVG, "svg");
+  svg.setAttribute("class", "sparkline");
+  svg.setAttribute("viewBox", "0 0 100 20");
+  svg.setAttribute("preserveAspectRatio", "none");
+  svg.setAttribute("aria-hidden", "true");
+  if (values.length > 1) {
+    const top = Math.max(1, ...values);
+    const points = values.map((v, i) => `${((100 * i) / (values.length - 1)).toFixed(1)},${(19 - (18 * v) / top).toFixed(1)}`);
+    const line = document.createElementNS(SVG, "polyline");
+    line.setAttribute("points", points.join(" "));
+    line.setAttribute("fill", "none");
+    line.setAttribute("stroke", "currentColor");
+    line.setAttribute("stroke-width", "1.5");
+    line.setAttribute("vector-effect", "non-scaling-stroke");
+    svg.append(line);
+  }
+  return svg;
+}
+
+/** Render an /api/occupancy-shaped view into the site line and the zone list; `trends` maps a zone
+ * id to its recent counts (oldest first) for a sparkline beside its count. */
+export function renderOccupancy(siteNode, zonesNode, now, crowdedLevelOfSite, trends = new Map()) {
   const parts = [
     el("span", { class: "big-count", "aria-label": `${now.total} people on site` }, String(now.total)),
     el("span", { class: "muted" }, now.capacity !== null ? `of ${now.capacity}` : "people"),
@@ -74,6 +98,7 @@ export function renderOccupancy(siteNode, zonesNode, now, crowdedLevelOfSite) {
           { class: "zone-line" },
           el("span", { class: "zone-name" }, zone.name || zone.id),
           levelTag(zone.level),
+          trends.has(zone.id) ? sparkline(trends.get(zone.id)) : null,
           el("span", { class: "zone-count", "aria-label": `${zone.count} people, capacity ${zone.capacity ?? "not set"}` }, ofCapacity(zone.count, zone.capacity)),
         ),
         bar(zone.count, zone.capacity, zone.crowded_level, zone.level),

@@ -128,3 +128,10 @@ def test_screenshot_is_a_rendered_dashboard(page: Page, tmp_path: Path) -> None:
     page.click("#people-list [data-track='1']")
     page.wait_for("document.getElementById('person-panel').dataset.loaded === 'true'", what="the person panel")
     (tmp_path / "dashboard-person.png").write_bytes(page.screenshot())
+
+
+def test_each_zone_has_a_sparkline_of_its_last_minutes(page: Page) -> None:
+    page.wait_for("document.querySelectorAll('#zone-bars .sparkline polyline').length === 3", timeout_s=20, what="the sparklines")
+    points = page.evaluate("document.querySelector('#zone-bars [data-zone=\"entrance\"] .sparkline polyline').getAttribute('points')")
+    assert len(points.split()) > 10  # ten minutes at one point per 10 s
+    assert page.errors() == []
