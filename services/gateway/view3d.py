@@ -1,7 +1,7 @@
 """The live 3D view: a viser server showing the floor, the cameras, the zones and the people.
 
 Drawn for a security operator glancing at a wall screen: a dark floor with a faint metre grid,
-zones as translucent coloured areas with their names, cameras as yellow frustums with their ids,
+zones as translucent areas with their names, coloured by occupancy as on the 2D map, cameras as yellow frustums with their ids,
 people as cyan cylinders with their track ids above their heads. Everyone in a distance violation
 turns red and stands on a red disc half the distance limit wide, and a red line, a few pixels
 thick at any zoom, joins each pair in violation.
@@ -25,6 +25,7 @@ import viser.transforms as vtf
 from bevflow.schemas import Tracks
 from bevflow.site import Site
 
+from bevflow_services.gateway.routes.occupancy import level_of
 from bevflow_services.gateway.state import GatewayState
 
 log = logging.getLogger(__name__)
@@ -36,8 +37,9 @@ PERSON_COLOR = (40, 190, 255)
 VIOLATION_COLOR = (255, 40, 40)
 CAMERA_COLOR = (255, 210, 40)
 COVERAGE_COLOR = (110, 100, 60)
-# Zone fills: none close to the people's cyan or to the violations' red and pink discs.
-ZONE_COLORS = ((255, 170, 30), (60, 200, 110), (190, 120, 255), (150, 210, 40), (230, 230, 230), (200, 150, 90))
+# Zone fills by occupancy level, meaning what they mean on the 2D map (not which zone it is).
+LEVEL_COLORS = {"unknown": (150, 160, 175), "normal": (60, 200, 110), "crowded": (255, 170, 30),
+                "over_capacity": (255, 80, 70)}
 ZONE_OPACITY = 0.22
 LABEL_LIFT_M = 0.25
 VIOLATION_LINE_Z_M = 1.0  # waist height: between the bodies, below the id labels
@@ -46,7 +48,8 @@ FRUSTUM_SCALE_M = 0.6
 INITIAL_FOV_DEG = 45.0
 DISC_OPACITY = 0.55
 LEGEND = """**People**: cyan cylinders with their track id; **red** with a red disc while closer than the
-distance limit to someone (a red line joins the pair). **Zones**: coloured areas with their names.
+distance limit to someone (a red line joins the pair). **Zones**: green normal, amber crowded, red over
+capacity, as on the 2D map.
 **Cameras**: yellow frustums; the thin circles are the areas they monitor."""
 
 
@@ -168,6 +171,7 @@ class View3D:
         self._lines: viser.LineSegmentsHandle | None = None
         self._discs: viser.BatchedMeshHandle | None = None
         self._mesh = unit_cylinder()
+        self._zones: dict[str, tuple[viser.MeshHandle, viser.LineSegmentsHandle, str]] = {}  # handles, level shown
 
     @property
     def port(self) -> int | None:
@@ -222,15 +226,16 @@ class View3D:
         assert self.server is not None
         scene = self.server.scene
         for k, zone in enumerate(self.site.zones):
-            color = ZONE_COLORS[k % len(ZONE_COLORS)]
+            color = LEVEL_COLORS["unknown"]
             polygon = np.asarray(zone.polygon, dtype=np.float64)
             # Stacked a millimetre apart so overlapping zones do not flicker against each other.
             z = 0.01 + 0.001 * k
             vertices = np.column_stack([polygon, np.full(len(polygon), z)]).astype(np.float32)
-            scene.add_mesh_simple(f"/zones/{zone.id}/area", vertices, triangulate(polygon), color=color,
-                                  opacity=ZONE_OPACITY, side="double", cast_shadow=False, receive_shadow=False)
-            scene.add_line_segments(f"/zones/{zone.id}/outline", polyline_segments(polygon, z + 0.005), colors=color,
-                                    thickness=0.08)
+            area = scene.add_mesh_simple(f"/zones/{zone.id}/area", vertices, triangulate(polygon), color=color,
+                                         opacity=ZONE_OPACITY, side="double", cast_shadow=False, receive_shadow=False)
+            outline = scene.add_line_segments(f"/zones/{zone.id}/outline", polyline_segments(polygon, z + 0.005),
+                                              colors=color, thickness=0.08)
+            self._zones[zone.id] = (area, outline, "unknown")
             cx, cy = polygon.mean(axis=0)
             scene.add_label(f"/zones/{zone.id}/label", zone.name or zone.id, position=(float(cx), float(cy), 0.05),
                             font_screen_scale=1.4, anchor="center-center")
@@ -264,7 +269,21 @@ class View3D:
             with self.server.atomic():
                 self._show_people(tracks)
                 self._show_violations(tracks)
+                self._show_zone_levels()
             self._shown_time_ns = tracks.time_ns
+
+    def _show_zone_levels(self) -> None:
+        """Recolour the zones whose occupancy level changed."""
+        occupancy = self.state.occupancy
+        counts = {z.id: z.count for z in occupancy.zones} if occupancy is not None else {}
+        for zone in self.site.zones:
+            area, outline, shown = self._zones[zone.id]
+            level = level_of(counts.get(zone.id, 0), zone.effective_crowded_level, zone.capacity)
+            if level != shown:
+                color = LEVEL_COLORS[level]
+                area.color = color
+                outline.colors = np.tile(np.array(color, dtype=np.uint8), (len(outline.points), 2, 1))
+                self._zones[zone.id] = (area, outline, level)
 
     def _show_people(self, tracks: Tracks) -> None:
         people = tracks.tracks

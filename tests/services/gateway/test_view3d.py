@@ -13,6 +13,7 @@ from bevflow.site import Site, parse_site
 
 from bevflow_services.gateway import GatewayState, create_app
 from bevflow_services.gateway.view3d import (
+    LEVEL_COLORS,
     PERSON_COLOR,
     VIOLATION_COLOR,
     View3D,
@@ -24,7 +25,7 @@ from bevflow_services.gateway.view3d import (
     vertical_fov,
 )
 from bevflow_services.launcher import free_port
-from tests.services.gateway.feed import S, SITE_YAML, T0, tracks
+from tests.services.gateway.feed import S, SITE_YAML, T0, occupancy, tracks
 
 
 def _get(url: str) -> tuple[int, str]:
@@ -57,6 +58,18 @@ def test_the_view_shows_the_latest_people_with_labels(view: View3D, state: Gatew
     state.apply(tracks(T0 + 2 * S, {}))
     view.refresh()
     assert (view.shown_people, view.shown_labels) == (0, [])
+
+
+def test_zones_are_coloured_by_their_occupancy_level_as_on_the_2d_map(view: View3D, state: GatewayState) -> None:
+    shown = lambda: {zone: (area.color, level) for zone, (area, _, level) in view._zones.items()}  # noqa: E731
+    state.apply(occupancy(T0, 9, gate=5, shop=6))  # gate over its capacity of 3, shop crowded from 5
+    state.apply(tracks(T0, {1: (1.0, 1.0)}))
+    view.refresh()
+    assert shown() == {"gate": (LEVEL_COLORS["over_capacity"], "over_capacity"), "shop": (LEVEL_COLORS["crowded"], "crowded")}
+    state.apply(occupancy(T0 + S, 2, gate=1, shop=1))
+    state.apply(tracks(T0 + S, {1: (1.0, 1.0)}))
+    view.refresh()
+    assert {zone: level for zone, (_, level) in shown().items()} == {"gate": "normal", "shop": "normal"}
 
 
 def test_violations_get_red_people_lines_and_discs(view: View3D, state: GatewayState) -> None:
