@@ -179,9 +179,13 @@ class View3D:
 
     def start(self) -> None:
         self.server = viser.ViserServer(host=self.host, port=self.requested_port, verbose=False)
-        self.server.gui.configure_theme(dark_mode=True, show_share_button=False, brand_color=PERSON_COLOR)
+        # A small panel that folds away, the legend folded in it: the scene is what the operator looks at.
+        self.server.gui.configure_theme(dark_mode=True, show_share_button=False, brand_color=PERSON_COLOR,
+                                        control_width="small", show_logo=False)
+        self.server.gui.main_panel.minimize()
         self.server.scene.set_up_direction("+z")
-        self.server.gui.add_markdown(LEGEND)
+        with self.server.gui.add_folder("Legend", expand_by_default=False):
+            self.server.gui.add_markdown(LEGEND)
         self._draw_site()
         self._thread = threading.Thread(target=self._run, name="view3d", daemon=True)
         self._thread.start()
