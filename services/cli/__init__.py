@@ -12,7 +12,7 @@ import sys
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 # Subcommand modules, in the order ``bevflow --help`` lists them.
-COMMANDS = ["demo", "serve", "evaluate", "bench", "plan", "calibrate", "users", "train-detector"]
+COMMANDS = ["demo", "serve", "evaluate", "bench", "plan", "calibrate", "users", "train-detector", "healthcheck"]
 
 
 def build_parser() -> argparse.ArgumentParser:
