@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+import re
 import tomllib
 from pathlib import Path
 
@@ -39,3 +40,47 @@ def test_core_library_imports_no_service_frameworks(path: Path) -> None:
             names = [node.module]
         for name in names:
             assert name.split(".")[0] not in forbidden, f"{path.name} imports {name}"
+
+
+def _pins() -> dict[str, str]:
+    lines = (ROOT / "constraints.txt").read_text().splitlines()
+    pairs = [line.split("==") for line in lines if line and not line.startswith("#")]
+    return {_normal(name): version for name, version in pairs}
+
+
+def _normal(name: str) -> str:
+    return name.split("[")[0].strip().lower().replace("_", "-")
+
+
+def _version(text: str) -> tuple[int, ...]:
+    return tuple(int(part) for part in text.split(".")[:3] if part.isdigit())
+
+
+def _requirements() -> list[str]:
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    return [*project["dependencies"], *project["optional-dependencies"]["test"]]
+
+
+@pytest.mark.parametrize("requirement", _requirements())
+def test_each_dependency_is_pinned_at_or_above_its_floor(requirement: str) -> None:
+    """constraints.txt pins what the tests ran on; pyproject's floors may not ask for more."""
+    name, _, floor = requirement.partition(">=")
+    pins = _pins()
+    assert _normal(name) in pins, f"{name} is missing from constraints.txt (scripts/freeze_constraints.py)"
+    assert floor, f"{requirement}: give a floor, the oldest version the tests ran on"
+    assert _version(pins[_normal(name)]) >= _version(floor), f"{requirement} but constraints.txt pins {pins[_normal(name)]}"
+
+
+def test_constraints_leave_out_the_project_and_local_paths() -> None:
+    assert "bevflow" not in _pins()
+    assert not [line for line in (ROOT / "constraints.txt").read_text().splitlines() if " @ " in line or line.startswith("-e")]
+
+
+def test_license_and_third_party_notices() -> None:
+    assert "Apache License" in (ROOT / "LICENSE").read_text()[:200]
+    assert tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["license"] == {"text": "Apache-2.0"}
+    notice = (ROOT / "NOTICE").read_text()
+    for path in re.findall(r"shared/bevflow/\S+?\.(?:onnx|txt|md)\b", notice):
+        assert (ROOT / path).is_file(), f"NOTICE names {path}, which does not exist"
+    shipped = {p.name for p in (ROOT / "shared/bevflow/data/models").glob("LICENSE-*")}
+    assert shipped and all(name in notice for name in shipped), "every model licence file is named in NOTICE"
