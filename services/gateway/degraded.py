@@ -45,19 +45,31 @@ class DataQuality:
         self.periods: deque[DegradedPeriod] = deque()
         self._reasons: list[str] = []
         self._checked_ns = 0
+        self.ticks = 0  # every tick so far, and the sum of their capture-to-arrival times, for /metrics
+        self.latency_sum_ns = 0
 
     def tick(self, capture_ns: int, received_ns: int) -> None:
         if self._ticks and capture_ns - self._ticks[-1][0] > self.gap_ns:
             self._gaps.append((received_ns, capture_ns - self._ticks[-1][0]))
         self._ticks.append((capture_ns, received_ns))
+        self.ticks += 1
+        self.latency_sum_ns += received_ns - capture_ns
         while self._ticks and received_ns - self._ticks[0][1] > self.window_ns:
             self._ticks.popleft()
         while self._gaps and received_ns - self._gaps[0][0] > self.window_ns:
             self._gaps.popleft()
 
+    def latest_ticks(self) -> list[tuple[int, int]]:
+        """The newest two ticks' (capture ns, received ns), oldest first; fewer before two came."""
+        return list(self._ticks)[-2:]
+
+    def due(self, now_ns: int) -> bool:
+        """Whether ``reasons`` would check again at ``now_ns`` (at most once a second)."""
+        return not self._checked_ns or now_ns - self._checked_ns >= NS
+
     def reasons(self, now_ns: int, cameras: list[CameraHealth]) -> list[str]:
         """What is wrong with the live data now (empty: nothing known); updates the periods."""
-        if now_ns - self._checked_ns < NS and self._checked_ns:
+        if not self.due(now_ns):
             return list(self._reasons)
         self._checked_ns = now_ns
         found = self._tick_reasons(now_ns) + camera_reasons(cameras, self.late_ns, self.drop_share)

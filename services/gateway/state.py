@@ -40,6 +40,17 @@ StateMessage = Tracks | Occupancy | Event | FrameHeader | Detections2D | CameraC
 
 
 @dataclass(frozen=True)
+class TickTiming:
+    """The tracker's ticks as the gateway received them: how many, the sum of their capture-to-
+    arrival times, the newest one's, and the capture interval of the newest two (None until known)."""
+
+    count: int
+    latency_sum_s: float
+    latency_s: float | None
+    interval_s: float | None
+
+
+@dataclass(frozen=True)
 class ServiceEntry:
     """A live service instance, as its liveliness token announced it."""
 
@@ -121,6 +132,9 @@ class GatewayState:
             self._tracks = tracks
             self._tracks_received_ns = self.clock()
             self._quality.tick(tracks.time_ns, self._tracks_received_ns)
+            check = self._quality.due(self._tracks_received_ns)
+        if check:  # the degraded periods are recorded whether or not anyone asks for /api/health
+            self.degraded()
         self.tracks_stream.publish(tracks)
         return True
 
@@ -180,6 +194,18 @@ class GatewayState:
         """Seconds since the latest tracks message arrived (gateway clock), None before the first."""
         received = self._tracks_received_ns
         return None if received is None else max(0.0, (self.clock() - received) / 1e9)
+
+    def tick_timing(self) -> TickTiming:
+        """How late the ticks reach the gateway and how far apart they are (``/metrics``)."""
+        with self._lock:
+            ticks = self._quality.latest_ticks()
+            count, latency_sum_ns = self._quality.ticks, self._quality.latency_sum_ns
+        return TickTiming(
+            count=count,
+            latency_sum_s=latency_sum_ns / 1e9,
+            latency_s=(ticks[-1][1] - ticks[-1][0]) / 1e9 if ticks else None,
+            interval_s=(ticks[-1][0] - ticks[-2][0]) / 1e9 if len(ticks) == 2 else None,
+        )
 
     def active_alerts(self) -> list[Event]:
         """Alerts that have started and not ended, oldest first."""
