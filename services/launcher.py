@@ -86,7 +86,8 @@ class ServiceGroup:
         return [c for c in self.children if c.process.poll() is not None]
 
     def wait_http(self, url: str, timeout_s: float = 30.0) -> None:
-        """Wait until ``url`` answers 200; raise ``RuntimeError`` naming a child that died."""
+        """Wait until ``url`` answers 200, or 503 (``/api/health`` while the site is not ok: the
+        gateway runs, the data has yet to come); raise ``RuntimeError`` naming a child that died."""
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
             for child in self.dead():
@@ -95,6 +96,9 @@ class ServiceGroup:
                 with urllib.request.urlopen(url, timeout=1.0) as response:
                     if response.status == 200:
                         return
+            except urllib.error.HTTPError as exc:
+                if exc.code == 503:
+                    return
             except (urllib.error.URLError, OSError):
                 pass
             time.sleep(0.2)

@@ -2,8 +2,9 @@
 
 export class ApiError extends Error {}
 
-/** GET `path` and parse its JSON; ApiError on a network failure, a timeout or an HTTP error. */
-export async function getJson(path, { timeoutMs = 5000 } = {}) {
+/** GET `path` and parse its JSON; ApiError on a network failure, a timeout or an HTTP error (but the
+ * statuses in `alsoOk`, whose body is the answer: /api/health says 503 while the site is not ok). */
+export async function getJson(path, { timeoutMs = 5000, alsoOk = [] } = {}) {
   const abort = new AbortController();
   const timer = setTimeout(() => abort.abort(), timeoutMs);
   try {
@@ -12,7 +13,7 @@ export async function getJson(path, { timeoutMs = 5000 } = {}) {
       // The session ended (expired, or logged out elsewhere): log in again, then come back here.
       location.assign(`/login.html?next=${encodeURIComponent(location.pathname + location.search)}`);
     }
-    if (!response.ok) {
+    if (!response.ok && !alsoOk.includes(response.status)) {
       const body = await response.json().catch(() => ({}));
       throw new ApiError(`${path}: HTTP ${response.status} ${body.message || body.detail || ""}`.trim());
     }

@@ -203,7 +203,7 @@ async function boot() {
   every(
     HEALTH_MS,
     polled(async () => {
-      const [health, { items: cameras }] = await Promise.all([getJson("/api/health"), getJson("/api/cameras?limit=1000")]);
+      const [health, { items: cameras }] = await Promise.all([getJson("/api/health", { alsoOk: [503] }), getJson("/api/cameras?limit=1000")]);
       if (monitor.live) renderStatus($("system-status"), health.status, health.reasons);
       renderDegraded($("degraded-banner"), $("degraded-detail"), health);
       chart.setDegraded(health.degraded_periods);

@@ -27,6 +27,7 @@ import math
 import tempfile
 import threading
 import time
+import urllib.error
 import urllib.request
 from collections import defaultdict
 from pathlib import Path
@@ -112,6 +113,8 @@ def gateway_bus_counters(base: str) -> dict[str, Any]:
     try:
         with urllib.request.urlopen(f"{base}/api/health", timeout=5) as response:
             return json.loads(response.read()).get("bus") or {}
+    except urllib.error.HTTPError as exc:  # 503 while the site is not ok, with the same body
+        return (json.loads(exc.read()).get("bus") or {}) if exc.code == 503 else {}
     except (OSError, ValueError):
         return {}
 

@@ -33,6 +33,7 @@ from bevflow_services.gateway.routes import acknowledge, alerts, cameras, health
 from bevflow_services.gateway.routes import auth as auth_routes
 from bevflow_services.gateway.routes import calibration as calibration_routes
 from bevflow_services.gateway.routes import history as history_routes
+from bevflow_services.gateway.routes import metrics as metrics_routes
 from bevflow_services.gateway.routes import reports
 from bevflow_services.gateway.routes import site as site_routes
 from bevflow_services.gateway.routes import users as users_routes
@@ -145,7 +146,7 @@ def create_app(
     # summaries) and acknowledging alerts need the operator role on the route itself; the
     # streams check their clients themselves; health answers anyone, for load balancers.
     viewer, admin = [Depends(require_role("viewer"))], [Depends(require_role("admin"))]
-    for module in (occupancy, intervals, tracks, alerts, cameras, site_routes, history_routes, reports):
+    for module in (occupancy, intervals, tracks, alerts, cameras, site_routes, history_routes, reports, metrics_routes):
         app.include_router(module.router, dependencies=viewer)
     app.include_router(calibration_routes.router, dependencies=admin)
     for module in (health, streams, acknowledge, auth_routes, users_routes):

@@ -160,8 +160,13 @@ class RestPoller:
 
 
 def get_json(url: str, timeout: float = 5.0) -> Any:
-    with urllib.request.urlopen(url, timeout=timeout) as response:
-        return json.loads(response.read())
+    try:
+        with urllib.request.urlopen(url, timeout=timeout) as response:
+            return json.loads(response.read())
+    except urllib.error.HTTPError as exc:
+        if exc.code != 503:  # /api/health while the site is not ok, with its whole body
+            raise
+        return json.loads(exc.read())
 
 
 def wait_until(condition, timeout_s: float, what: str, group: ServiceGroup) -> None:

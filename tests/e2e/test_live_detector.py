@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import threading
 import time
+import urllib.error
 import urllib.request
 from pathlib import Path
 
@@ -27,8 +28,13 @@ SPARE = "spare"
 
 
 def get_json(url: str) -> dict | list:
-    with urllib.request.urlopen(url, timeout=5) as response:
-        return json.loads(response.read())
+    try:
+        with urllib.request.urlopen(url, timeout=5) as response:
+            return json.loads(response.read())
+    except urllib.error.HTTPError as exc:
+        if exc.code != 503:  # /api/health while the site is not ok, with its whole body
+            raise
+        return json.loads(exc.read())
 
 
 def two_camera_hall() -> str:

@@ -1,15 +1,20 @@
-"""``/api/health``: which services are alive, and whether data is flowing."""
+"""``/api/health``: which services are alive, and whether data is flowing.
+
+It answers 503 (with the same body) whenever the status is not ``ok``, so a load balancer, a
+container probe or a monitoring check can act on the code alone.
+"""
 
 from __future__ import annotations
 
 from typing import Any, Literal
 
-from fastapi import APIRouter, Request
+from fastapi import APIRouter, Request, Response
 from pydantic import BaseModel, Field
 
 from bevflow.schemas import iso_utc
 
 from bevflow_services.gateway.params import StateDep
+from bevflow_services.gateway.state import GatewayState
 
 router = APIRouter(prefix="/api", tags=["health"])
 
@@ -56,8 +61,20 @@ class Health(BaseModel):
     bus: dict[str, Any] | None = Field(default=None, description="the bus subscriptions' counters, when fed from the bus")
 
 
-@router.get("/health", response_model=Health, summary="Live services and data flow")
-def health(request: Request, state: StateDep) -> Health:
+NOT_OK = 503  # Service Unavailable: what load balancers and probes take as "not ready"
+
+
+@router.get("/health", response_model=Health, summary="Live services and data flow",
+            responses={NOT_OK: {"model": Health, "description": "the status is not ok: no_data, stale or degraded"}})
+def health(request: Request, response: Response, state: StateDep) -> Health:
+    body = site_health(state, getattr(request.app.state, "bus_stats", None))
+    if body.status != "ok":
+        response.status_code = NOT_OK
+    return body
+
+
+def site_health(state: GatewayState, bus_stats: Any = None) -> Health:
+    """The site's health now, as ``/api/health`` reports it (also read by ``/metrics``)."""
     now = state.clock()
     cameras = [c.state for c in state.camera_health()]
     counts = CameraCounts(up=cameras.count("up"), down=cameras.count("down"), unknown=cameras.count("unknown"))
@@ -84,5 +101,5 @@ def health(request: Request, state: StateDep) -> Health:
         degraded_periods=[Period(start=iso_utc(p.start_ns), end=None if p.end_ns is None else iso_utc(p.end_ns),
                                  start_ns=p.start_ns, end_ns=p.end_ns, reasons=p.reasons) for p in periods],
         ignored_messages=state.ignored,
-        bus=None if (stats := getattr(request.app.state, "bus_stats", None)) is None else stats.snapshot(),
+        bus=None if bus_stats is None else bus_stats.snapshot(),
     )

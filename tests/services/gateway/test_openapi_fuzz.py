@@ -174,9 +174,17 @@ def client(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TestClient]:
         db.close()
 
 
-def check_response(response: Any, url: str, query: dict[str, str]) -> None:
+def declared_5xx(path: str, method: str) -> set[int]:
+    """Server-side codes the spec documents as answers (``/api/health``'s 503: the site is not ok)."""
+    return {int(code) for code in SPEC["paths"][path][method].get("responses", {}) if code.startswith("5")}
+
+
+def check_response(response: Any, url: str, query: dict[str, str], allowed: set[int] = frozenset()) -> None:
     where = f"{url} {query}"
-    assert response.status_code < 500, f"{where} -> {response.status_code}: {response.text[:500]}"
+    assert response.status_code < 500 or response.status_code in allowed, \
+        f"{where} -> {response.status_code}: {response.text[:500]}"
+    if response.status_code in allowed:
+        return
     if response.status_code >= 400:
         body = response.json()
         text = body.get("message") or body.get("detail")
@@ -192,7 +200,8 @@ def test_every_operation_in_the_spec_answers_with_valid_input(client: TestClient
             continue
         url = path.replace("{track_id}", "1").replace("{camera_id}", "north")
         response = client.get(url)
-        assert response.status_code == 200, f"{url}: {response.status_code} {response.text[:300]}"
+        assert response.status_code in {200} | declared_5xx(path, method), \
+            f"{url}: {response.status_code} {response.text[:300]}"
 
 
 @pytest.mark.parametrize(("path", "method"), OPERATIONS, ids=[f"{m.upper()} {p}" for p, m in OPERATIONS])
@@ -203,7 +212,7 @@ def test_no_request_gets_a_server_error(client: TestClient, path: str, method: s
     def run(request: tuple[str, dict[str, str], Any]) -> None:
         url, query, payload = request
         response = client.request(method.upper(), url, params=query, json=payload)
-        check_response(response, f"{method.upper()} {url}", query)
+        check_response(response, f"{method.upper()} {url}", query, declared_5xx(path, method))
 
     run()
 

@@ -1,0 +1,89 @@
+"""``/metrics``: Prometheus text with the same counters as ``/api/health`` and ``/api/cameras``."""
+
+from __future__ import annotations
+
+from fastapi.testclient import TestClient
+from prometheus_client.parser import text_string_to_metric_families
+
+from bevflow.schemas import CameraHealthEvent, FrameHeader
+from bevflow.site import Site
+
+from bevflow_services.bus import BusStats
+from bevflow_services.gateway.state import GatewayState
+from tests.services.gateway.access import secured_client
+from tests.services.gateway.feed import S, T0, FakeClock, incident, occupancy, tracks
+
+
+def scrape(client: TestClient, **kwargs) -> dict[tuple[str, tuple], float]:
+    response = client.get("/metrics", **kwargs)
+    assert response.status_code == 200
+    assert response.headers["content-type"].startswith("text/plain; version=")
+    samples = {}
+    for family in text_string_to_metric_families(response.text):
+        assert family.name.startswith("bevflow_"), family.name
+        for sample in family.samples:
+            samples[(sample.name, tuple(sorted(sample.labels.items())))] = sample.value
+    return samples
+
+
+def frame(camera: str, seq: int, capture_ns: int) -> FrameHeader:
+    return FrameHeader(camera=camera, seq=seq, capture_ns=capture_ns, width=4, height=4)
+
+
+def test_status_follows_health(client: TestClient, state: GatewayState, clock: FakeClock) -> None:
+    before = scrape(client)
+    assert before[("bevflow_site_ok", ())] == 0.0
+    assert before[("bevflow_site_status", (("status", "no_data"),))] == 1.0
+    state.apply(tracks(T0, {1: (0.0, 0.0)}))
+    after = scrape(client)
+    assert after[("bevflow_site_ok", ())] == 1.0
+    assert after[("bevflow_site_status", (("status", "ok"),))] == 1.0
+    assert after[("bevflow_site_status", (("status", "no_data"),))] == 0.0
+
+
+def test_cameras_frames_and_lag(client: TestClient, state: GatewayState, clock: FakeClock) -> None:
+    clock.advance(0.25)
+    for seq in (1, 2, 5):  # 3 and 4 lost
+        state.apply(frame("north", seq, T0))
+    state.apply(CameraHealthEvent(id="d", type="camera_down", camera="south", start_ns=T0))
+    m = scrape(client)
+    assert m[("bevflow_camera_frames_received_total", (("camera", "north"),))] == 3
+    assert m[("bevflow_camera_frames_dropped_total", (("camera", "north"),))] == 2
+    assert m[("bevflow_camera_lag_seconds", (("camera", "north"),))] == 0.25
+    assert m[("bevflow_camera_state", (("camera", "north"), ("state", "up")))] == 1.0
+    assert m[("bevflow_camera_state", (("camera", "south"), ("state", "down")))] == 1.0
+
+
+def test_ticks_latency_occupancy_alerts(client: TestClient, state: GatewayState, clock: FakeClock) -> None:
+    clock.advance(0.5)
+    state.apply(tracks(T0, {1: (0.0, 0.0)}))
+    clock.advance(0.2)
+    state.apply(tracks(T0 + S // 10, {1: (0.0, 0.0)}))
+    state.apply(occupancy(T0, total=7, gate=4))
+    state.apply(incident("i1", T0))
+    m = scrape(client)
+    assert m[("bevflow_tick_latency_seconds_count", ())] == 2
+    assert abs(m[("bevflow_tick_latency_seconds_sum", ())] - 1.1) < 1e-9
+    assert abs(m[("bevflow_last_tick_latency_seconds", ())] - 0.6) < 1e-9
+    assert abs(m[("bevflow_tick_interval_seconds", ())] - 0.1) < 1e-9
+    assert m[("bevflow_occupancy_people", ())] == 7
+    assert m[("bevflow_zone_occupancy_people", (("zone", "gate"),))] == 4
+    assert m[("bevflow_alerts_active", (("type", "distance_incident"),))] == 1
+    assert m[("bevflow_websocket_clients", (("stream", "alerts"),))] == 0
+
+
+def test_bus_counters_when_fed_from_the_bus(client: TestClient) -> None:
+    stats = BusStats()
+    stats.count("received", 5)
+    stats.count("dropped", 2)
+    stats.reject("k", "invalid json", "x")
+    client.app.state.bus_stats = stats  # type: ignore[attr-defined]
+    m = scrape(client)
+    assert m[("bevflow_bus_messages_total", (("outcome", "dropped"),))] == 2
+    assert m[("bevflow_bus_rejected_total", (("reason", "invalid json"),))] == 1
+
+
+def test_metrics_need_a_viewer_token(site: Site, state: GatewayState) -> None:
+    with secured_client(site, state) as (client, secure):
+        assert client.get("/metrics").status_code == 401
+        assert scrape(client, headers={"Authorization": f"Bearer {secure.tokens['viewer']}"})
