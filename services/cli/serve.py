@@ -20,7 +20,7 @@ from types import ModuleType
 
 from bevflow.site import Site, SiteError, load_site_or_builtin
 
-from bevflow_services import bus
+from bevflow_services import bus, redact
 from bevflow_services.cli import UserError
 
 SERVICES: dict[str, str] = {
@@ -61,6 +61,7 @@ def run_service(name: str, argv: list[str], *, package: str = PACKAGE) -> int:
     module = load_service(name, package=package)
     args = parse_service_args(service_parser(name, module), argv)
     logging.basicConfig(level=args.log_level.upper(), format=f"%(asctime)s {name} %(levelname)s %(name)s: %(message)s")
+    redact.install()  # no password or token in any log line, whichever code logs it
     try:
         bus.config_from_args(args)  # bad bus flags fail here, before the service starts anything
         return int(module.main(args) or 0)

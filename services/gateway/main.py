@@ -28,6 +28,7 @@ import uvicorn
 
 from bevflow.schemas import CameraCylinders, Detections2D, Event, FrameHeader, Occupancy, Tracks
 
+from bevflow_services import redact
 from bevflow_services.bus import (
     FRAMES,
     AsyncSubscription,
@@ -188,8 +189,10 @@ def main(args: argparse.Namespace) -> int:
     cylinders = subscribe(session, keys.cylinders("*"), JsonCodec(CameraCylinders), inputs.put_cylinders, stats=stats)
     announce_setup(access, args)
     try:
-        uvicorn.Server(uvicorn.Config(app, host=args.host, port=args.port, log_level="info",
-                                      ssl_certfile=args.tls_cert, ssl_keyfile=args.tls_key)).run()
+        config = uvicorn.Config(app, host=args.host, port=args.port, log_level="info",
+                                ssl_certfile=args.tls_cert, ssl_keyfile=args.tls_key)
+        redact.install()  # after uvicorn set up its loggers: its access log would show ?token=
+        uvicorn.Server(config).run()
     finally:
         cylinders.close()
         session.close()

@@ -18,6 +18,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from bevflow_services.redact import redact
+
 log = logging.getLogger(__name__)
 
 IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff"}
@@ -42,12 +44,12 @@ def read_frames(source: str, folder_fps: float = 10.0) -> Iterator[np.ndarray]:
         return
     capture = cv2.VideoCapture(source)
     if not capture.isOpened():
-        raise SourceError(f"cannot open camera source {source!r}")
+        raise SourceError(f"cannot open camera source {redact(source)!r}")
     try:
         while True:
             ok, image = capture.read()
             if not ok or image is None:
-                raise SourceError(f"camera source {source!r} stopped delivering frames")
+                raise SourceError(f"camera source {redact(source)!r} stopped delivering frames")
             yield image
     finally:
         capture.release()
@@ -86,7 +88,7 @@ class LatestFrameReader:
         self._latest: CapturedFrame | None = None
         self._ready = threading.Condition()
         self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name=f"source {source}", daemon=True)
+        self._thread = threading.Thread(target=self._run, name=f"source {redact(source)}", daemon=True)
 
     def start(self) -> LatestFrameReader:
         self._thread.start()
@@ -116,7 +118,7 @@ class LatestFrameReader:
             except SourceError as exc:
                 self.last_error = str(exc)
             except cv2.error as exc:
-                self.last_error = f"camera source {self.source!r}: {exc}"
+                self.last_error = redact(f"camera source {self.source!r}: {exc}")
             self.up = False
             if not self.loop:
                 return

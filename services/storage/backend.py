@@ -18,6 +18,7 @@ from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from typing import Any, Literal, Protocol
 
+from bevflow_services.redact import redact
 from bevflow_services.storage.records import StorageError
 
 Row = tuple[Any, ...]
@@ -86,7 +87,3 @@ def open_backend(url: str) -> Backend:
 
     return SqliteBackend(url)
 
-
-def redact(url: str) -> str:
-    """``url`` with any password replaced by ``***``."""
-    return re.sub(r"^([a-z][a-z0-9+.-]*://[^/:@]*):[^/@]*@", r"\1:***@", url)

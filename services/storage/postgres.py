@@ -3,18 +3,25 @@
 One connection, shared by the threads of a process (calls are serialised). A write on a lost
 connection (the server restarted) raises ``StorageUnavailable``, and the next call connects again,
 so the recorder keeps its unwritten batch and retries; a read is simply tried again at once.
+
+The password need not be in the URL (where ``ps`` and shell history would show it): without one,
+it comes from the file ``BEVFLOW_DB_PASSWORD_FILE`` names (a Docker or systemd secret), else
+from libpq's own ``PGPASSWORD`` or ``~/.pgpass`` (``PGPASSFILE``).
 """
 
 from __future__ import annotations
 
+import os
 import threading
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from typing import Any
 
 import psycopg
+from psycopg.conninfo import conninfo_to_dict
 
-from bevflow_services.storage.backend import Dialect, Row, redact
+from bevflow_services.redact import redact
+from bevflow_services.storage.backend import Dialect, Row
 from bevflow_services.storage.records import StorageError, StorageUnavailable
 
 DIALECT = Dialect(
@@ -24,6 +31,24 @@ DIALECT = Dialect(
     # Two processes starting together (recorder and gateway) must not both create the tables.
     migration_lock="SELECT pg_advisory_xact_lock(7201507)",
 )
+
+
+PASSWORD_FILE_VARIABLE = "BEVFLOW_DB_PASSWORD_FILE"
+
+
+def password_from_file(url: str, environ: Mapping[str, str] = os.environ) -> dict[str, str]:
+    """``{"password": ...}`` read from the file ``BEVFLOW_DB_PASSWORD_FILE`` names, when it is
+    set and ``url`` has no password of its own; ``{}`` otherwise (libpq's defaults then apply)."""
+    path = environ.get(PASSWORD_FILE_VARIABLE)
+    if not path or conninfo_to_dict(url).get("password"):
+        return {}
+    try:
+        password = open(path, encoding="utf-8").read().rstrip("\r\n")
+    except OSError as exc:
+        raise StorageError(f"{PASSWORD_FILE_VARIABLE}: cannot read {path} ({exc.strerror or exc})") from None
+    if not password:
+        raise StorageError(f"{PASSWORD_FILE_VARIABLE}: {path} is empty")
+    return {"password": password}
 
 
 def _sql(statement: str) -> str:
@@ -54,6 +79,7 @@ class PostgresBackend:
     def __init__(self, url: str, *, connect_timeout_s: int = 10) -> None:
         self.url = redact(url)
         self._dsn = url
+        self._password = password_from_file(url)
         self._connect_timeout_s = connect_timeout_s
         self._lock = threading.RLock()
         self._conn: psycopg.Connection[Any] | None = None
@@ -66,7 +92,8 @@ class PostgresBackend:
         if self._conn is not None and not self._conn.closed and not self._conn.broken:
             return self._conn
         try:
-            self._conn = psycopg.connect(self._dsn, autocommit=True, connect_timeout=self._connect_timeout_s)
+            self._conn = psycopg.connect(self._dsn, autocommit=True, connect_timeout=self._connect_timeout_s,
+                                         **self._password)
         except psycopg.Error as exc:
             reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
             raise StorageUnavailable(f"database {self.url}: cannot connect: {reason}") from None

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import re
-
 from fastapi import APIRouter, Request
 from pydantic import BaseModel, Field
 
@@ -11,6 +9,7 @@ from bevflow.schemas import EVENT_TYPES, SCHEMA_VERSION
 from bevflow.site import Site
 
 from bevflow_services.gateway.params import SiteDep
+from bevflow_services.redact import redact
 
 router = APIRouter(prefix="/api", tags=["site"])
 
@@ -27,9 +26,7 @@ class ClientConfig(BaseModel):
 
 def redact_source(source: str | None) -> str | None:
     """A camera source with any password in its URL hidden (``rtsp://user:***@host/...``)."""
-    if source is None:
-        return None
-    return re.sub(r"^([a-zA-Z][\w+.-]*://[^/:@]*):[^/@]*@", r"\1:***@", source)
+    return None if source is None else redact(source)
 
 
 @router.get("/site", response_model=Site, summary="The site description: cameras, zones, thresholds")
