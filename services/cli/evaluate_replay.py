@@ -99,7 +99,8 @@ def format_replay(r: ReplayEvaluation, site: Site) -> str:
     c = r.tracker
     head = (f"{site.site}: {len(site.cameras)} cameras, frames {r.frame_numbers[0]}..{r.frame_numbers[-1]} at {r.fps:g} fps, "
             f"boxes of confidence >= {r.min_confidence:g}, matched within {r.threshold_m:g} m; tracker: "
-            f"{c.activate_hits} hits to confirm, {c.max_misses} misses to drop, gate {c.gate_m:g} m")
+            f"{c.activate_hits} hits to confirm, {c.max_misses} misses to drop, gate {c.gate_m:g} m"
+            + ("" if c.gate_chi2 is None else f" and chi2 {c.gate_chi2:g} of the prediction"))
     columns = f"{'':<9} {'MODA':>6} {'MOTA':>6} {'IDF1':>6} {'HOTA':>6} {'DetA':>6} {'AssA':>6} {'IDSW':>5} {'prec':>6} {'recall':>6} {'APE m':>6} {'frames':>6}"
     rows = [head, columns]
     for name, s, h in (("online", r.scores, r.hota), ("settled", r.settled, r.settled_hota)):

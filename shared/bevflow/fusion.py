@@ -74,6 +74,20 @@ false positives fall from 216 to 158 and the misses rise from 406 to 412 (MODA 0
 Ceiling cameras look down steeper than that within their monitored radius, so the paper's case
 is untouched.
 
+**Tracks as priors.** Fusion on its own judges each pair of views by their feet alone; on real
+side views (CMC2: four cameras 2.15 m up in a small room) one person's views scatter by 0.2–0.5 m,
+past the gate, so a person splits into two estimates. ``priors``, the tracker's predicted feet
+(``Tracker.predicted``, with their covariance), join them: each camera's views are assigned, one
+to one, to the priors within ``gate_chi2`` of them (Mahalanobis under the sum of both
+covariances; as many pairs as possible, at the least total d²), and after the grouping above,
+groups whose views went to one prior become one person where their cameras differ (one camera
+never boxes a person twice).
+Priors only join, never split: a stale or duplicate track that takes one camera's view of a
+person must not keep that view from the person's other views (tried: on the detector suite's
+queue, seq 5 with both cameras, it kept duplicates alive, MOTA 0.941 → 0.894). A group of weak
+views only is a person where one of its views went to a prior: the track says someone is there
+(the tracker continues only confirmed tracks with weak detections).
+
 ``noise=None`` is the paper's fusion: the 0.45 m rule alone, and the mean weighted by score /
 range² (range: camera centre to feet), a monocular fit's error growing with range.
 
@@ -96,6 +110,7 @@ from scipy.spatial import cKDTree
 
 from bevflow.camera import Camera
 from bevflow.detections import Cylinders
+from bevflow.metrics.matching import assign_edges, gated_pairs
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -143,13 +158,16 @@ def fuse_cylinders(
     gate_chi2: float = 9.21,
     max_gate_m: float = 2.0,
     hidden_view_slope: float = 4.0,
+    priors: Cylinders | None = None,
 ) -> Fusion:
     """Merge the cylinders of different cameras that are one person: feet closer than
     ``distance_m``, or (unless ``noise`` is None) within ``gate_chi2`` of each other given their
     position covariances and closer than ``max_gate_m``. ``cylinders.camera`` indexes ``cameras``.
     With ``noise``, rows with a finite ``cylinders.covariance`` use it and ``noise`` gives the
     others theirs; the paper's rule (``noise=None``) uses no covariance. ``hidden_view_slope``: see
-    "Hidden views the occlusion test missed" (``math.inf`` folds none; the paper's rule folds none)."""
+    "Hidden views the occlusion test missed" (``math.inf`` folds none; the paper's rule folds none).
+    ``priors``: people expected this tick, feet and covariance (module docstring, "Tracks as
+    priors"); used only with ``noise``."""
     if not (distance_m > 0 and gate_chi2 > 0 and max_gate_m > 0 and hidden_view_slope > 0):
         raise ValueError(
             "distance_m, gate_chi2, max_gate_m and hidden_view_slope must be > 0, got "
@@ -159,15 +177,23 @@ def fuse_cylinders(
     keep = np.flatnonzero(np.isfinite(cylinders.xy).all(axis=1))
     assignment = np.full(len(cylinders), -1, dtype=np.int64)
     rows = cylinders[keep]
+    on_prior = np.zeros(len(rows), dtype=bool)
     if noise is None:
         info = _range_information(rows, cameras)
         labels = _group(rows.xy, rows.camera, None, distance_m, gate_chi2, max_gate_m)
     else:
         covariance = _carried_or_computed_covariance(rows, cameras, noise)
         info = _inverse_2x2(covariance)
-        labels = _group(rows.xy, rows.camera, covariance, distance_m, gate_chi2, max_gate_m)
-    strong = rows.score > 0
-    real = (np.bincount(labels, weights=strong) > 0)[labels]  # in a group with a strong view
+        if priors is not None and len(priors):
+            labels, on_prior = _group_with_priors(rows, covariance, priors, distance_m, gate_chi2, max_gate_m)
+        else:
+            labels = _group(rows.xy, rows.camera, covariance, distance_m, gate_chi2, max_gate_m)
+    n_strong = np.bincount(labels, weights=rows.score > 0)
+    expected = np.bincount(labels, weights=on_prior, minlength=len(n_strong)) > 0
+    # A group of weak views only is placed by them where a prior vouches for someone there.
+    placed_by_weak = (n_strong == 0) & expected
+    strong = (rows.score > 0) | placed_by_weak[labels]
+    real = ((n_strong > 0) | expected)[labels]
     sightings = _sightings(rows[~real], cameras, noise or PositionNoise())
     if not real.any():
         return Fusion(Cylinders.empty(), assignment, np.zeros(0, dtype=np.int64), sightings)
@@ -401,6 +427,74 @@ def _group(
         in_tangled = np.isin(labels[pairs[:, 0]], tangled)
         _split_greedily(labels, camera, pairs[in_tangled], depth[in_tangled])
     return labels
+
+
+def _group_with_priors(
+    rows: Cylinders, covariance: FloatArray, priors: Cylinders, distance_m: float, gate_chi2: float, max_gate_m: float
+) -> tuple[IntArray, NDArray[np.bool_]]:
+    """``_group``'s labels, then the groups whose views went to one prior joined where their
+    cameras differ (module docstring, "Tracks as priors"); also which rows went to a prior."""
+    labels = _group(rows.xy, rows.camera, covariance, distance_m, gate_chi2, max_gate_m)
+    prior_of = _views_on_priors(rows, covariance, priors, gate_chi2, max_gate_m)
+    on = prior_of >= 0
+    prior_group = np.unique(np.stack([prior_of[on], labels[on]], axis=1), axis=0)  # sorted by prior
+    split = prior_group[(np.bincount(prior_group[:, 0], minlength=len(priors)) > 1)[prior_group[:, 0]]]
+    if not len(split):  # the common case: every prior's views are in one group already
+        return labels, on
+    starts = np.flatnonzero(np.diff(split[:, 0]))
+    return _join(labels, rows.camera, np.split(split[:, 1], starts + 1)), on
+
+
+def _join(labels: IntArray, camera: IntArray, candidates: list[IntArray]) -> IntArray:
+    """``labels`` with each of ``candidates`` (arrays of group labels, in turn) made one group
+    where the groups' cameras, as joined so far, are all distinct. Few groups take part (a
+    prior's views mostly group as their prior's do), so plain Python over them is cheapest."""
+    involved = np.flatnonzero(np.isin(labels, np.concatenate(candidates)))
+    members: dict[int, list[int]] = {}
+    for row, group in zip(involved.tolist(), labels[involved].tolist()):
+        members.setdefault(group, []).append(row)
+    root = {group: group for group in members}
+    joined = {group: list(rows) for group, rows in members.items()}
+    cameras = camera.tolist()
+
+    def find(group: int) -> int:
+        while root[group] != group:
+            group = root[group]
+        return group
+
+    for groups in candidates:
+        heads = sorted({find(g) for g in groups.tolist()})
+        together = [r for head in heads for r in joined[head]]
+        if len(heads) > 1 and len({cameras[r] for r in together}) == len(together):
+            for head in heads[1:]:
+                root[head] = heads[0]
+            joined[heads[0]] = together
+    out = labels.copy()
+    for group, rows in members.items():
+        out[rows] = find(group)
+    return out
+
+
+def _views_on_priors(
+    rows: Cylinders, covariance: FloatArray, priors: Cylinders, gate_chi2: float, max_gate_m: float
+) -> IntArray:
+    """The prior each view is assigned to, −1 for none: each camera's views one to one to the
+    priors within ``gate_chi2`` (and ``max_gate_m``), as many pairs as possible and among those
+    the least total d². Candidates come from k-d trees, so the cost follows the crowd's size."""
+    prior_of = np.full(len(rows), -1, dtype=np.int64)
+    view, prior, _ = gated_pairs(rows.xy, priors.xy, max_gate_m)
+    if not len(view):
+        return prior_of
+    prior_covariance = priors.covariance if priors.covariance is not None else np.zeros((len(priors), 2, 2))
+    offset = rows.xy[view] - priors.xy[prior]
+    d2 = np.einsum("ni,nij,nj->n", offset, _inverse_2x2(covariance[view] + prior_covariance[prior]), offset)
+    within = d2 < gate_chi2
+    view, prior, d2 = view[within], prior[within], d2[within]
+    # One solve for all cameras: a (camera, prior) pair per column keeps each camera's choice its own.
+    slots, column = np.unique(rows.camera[view] * len(priors) + prior, return_inverse=True)
+    matched_view, matched_slot = assign_edges(view, column, d2, len(rows), len(slots))
+    prior_of[matched_view] = slots[matched_slot] % len(priors)
+    return prior_of
 
 
 def _components(n: int, a: IntArray, b: IntArray) -> IntArray:

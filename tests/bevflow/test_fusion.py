@@ -479,3 +479,44 @@ def test_grouping_follows_the_greedy_rule_pair_by_pair(seed):
     assignment = fuse_cylinders(seen, cameras).assignment
     groups = {frozenset(np.flatnonzero(assignment == row).tolist()) for row in range(assignment.max() + 1)}
     assert groups == greedy_cliques(seen.xy, camera, position_covariance(seen, cameras))
+
+
+# --- tracks as priors -------------------------------------------------------------------------------
+def _priors(*xy: tuple[float, float], sigma_m: float = 0.1) -> Cylinders:
+    return Cylinders(xy=list(xy), covariance=np.tile(sigma_m**2 * np.eye(2), (len(xy), 1, 1)))
+
+
+@pytest.mark.parametrize(
+    "xy, camera, score, priors, expected_assignment, expected_views",
+    [
+        # two views 0.6 m apart, too far to merge alone, both near one prior: one person
+        ([[2.0, 0.0], [2.6, 0.0]], [0, 1], [1.0, 1.0], _priors((2.3, 0.0), sigma_m=0.25), [0, 0], [2]),
+        # the same views without a prior: two people
+        ([[2.0, 0.0], [2.6, 0.0]], [0, 1], [1.0, 1.0], None, [0, 1], [1, 1]),
+        # one camera's two views near one prior: the nearer one joins it, the other is someone else
+        ([[2.0, 0.0], [2.3, 0.0]], [0, 0], [1.0, 1.0], _priors((2.05, 0.0)), [0, 1], [1, 1]),
+        # a weak view alone is nobody, but where a prior expects someone it places them
+        ([[2.0, 0.0]], [0], [0.0], None, [-1], []),
+        ([[2.0, 0.0]], [0], [0.0], _priors((2.05, 0.0)), [0], [1]),
+        # a prior with no view near it makes no one
+        ([[2.0, 0.0]], [0], [1.0], _priors((5.0, 2.0)), [0], [1]),
+    ],
+    ids=["views of one prior", "no prior", "one view per camera", "weak alone", "weak on a prior", "prior far away"],
+)
+def test_priors_group_the_views_of_the_people_expected(xy, camera, score, priors, expected_assignment, expected_views):
+    fusion = fuse_cylinders(Cylinders(xy=xy, camera=camera, score=score), THREE, priors=priors)
+    assert fusion.assignment.tolist() == expected_assignment
+    assert fusion.n_views.tolist() == expected_views
+
+
+def test_a_weak_view_on_a_prior_moves_the_person_and_is_not_a_sighting():
+    seen = Cylinders(xy=[[2.0, 0.0], [2.2, 0.0]], camera=[0, 1], score=[0.0, 0.0])
+    fusion = fuse_cylinders(seen, THREE, priors=_priors((2.1, 0.0)))
+    assert len(fusion.sightings) == 0
+    np.testing.assert_allclose(fusion.fused.xy, [[2.1, 0.0]], atol=0.05)
+    assert fusion.fused.score.tolist() == [0.0]  # still weak: the tracker only continues tracks with it
+
+
+def test_priors_with_nothing_seen_make_no_one():
+    fusion = fuse_cylinders(Cylinders.empty(), THREE, priors=_priors((2.0, 0.0)))
+    assert (len(fusion.fused), fusion.assignment.tolist()) == (0, [])

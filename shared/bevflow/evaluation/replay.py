@@ -23,7 +23,6 @@ right nor wrong (``scored_estimates``, as for WILDTRACK): nobody outside it is a
 
 from __future__ import annotations
 
-import inspect
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
@@ -108,13 +107,14 @@ def replay_tracking(
     threshold_m: float = 0.5,
 ) -> ReplayEvaluation:
     """Replay ``recording`` through the live pipeline of ``site`` and score it against ``truth``
-    (module docstring). ``tracker`` default: the site's settings for ``fps`` updates a second,
-    as the tracker service would run them."""
+    (module docstring). ``tracker`` default: the site's settings, as the tracker service runs
+    them; the frame rate reaches them through the time between updates (the tracker's gates
+    follow the filter's uncertainty, which grows with it)."""
     if not fps > 0:
         raise ValueError(f"fps must be > 0, got {fps}")
     if not truth.frame_numbers:
         raise ValueError("the truth has no rows: nothing to score")
-    config = tracker or live_tracker_config(site, fps)
+    config = tracker or TrackerConfig.from_thresholds(site.thresholds)
     first_scored, last = truth.frame_numbers[0], truth.frame_numbers[-1]
     first = min([first_scored, *recording.frame_numbers[:1]])
     run = _Run(site, config, area, threshold_m)
@@ -124,14 +124,6 @@ def replay_tracking(
                       if len(boxes := c.boxes(frame, min_confidence))}
         run.step(frame, frame / fps, per_camera, truth.at(frame) if frame >= first_scored else None)
     return run.finish(tuple(range(first_scored, last + 1)), fps, min_confidence)
-
-
-def live_tracker_config(site: Site, fps: float) -> TrackerConfig:
-    """The tracker service's settings for ``site`` at ``fps`` updates a second: those that depend
-    on the frame rate follow from it where ``TrackerConfig.from_thresholds`` takes one."""
-    if "frame_rate_hz" in inspect.signature(TrackerConfig.from_thresholds).parameters:
-        return TrackerConfig.from_thresholds(site.thresholds, frame_rate_hz=fps)
-    return TrackerConfig.from_thresholds(site.thresholds)
 
 
 class _Run:

@@ -55,8 +55,10 @@ class SiteTracker:
         """Advance to ``time_ns`` with each reporting camera's cylinders (cameras missing from
         ``per_camera`` saw nothing this tick or did not report)."""
         seen = self._merge_cameras(per_camera)
-        fusion = fuse_cylinders(seen, self.cameras, self.site.thresholds.fusion_distance_m)
-        table = self.tracker.update(fusion.fused, time_ns / 1e9, fusion.sightings)
+        time_s = time_ns / 1e9
+        expected = self.tracker.predicted(time_s)  # the confirmed tracks guide fusion ("Tracks as priors")
+        fusion = fuse_cylinders(seen, self.cameras, self.site.thresholds.fusion_distance_m, priors=expected)
+        table = self.tracker.update(fusion.fused, time_s, fusion.sightings)
         tick = self.analytics.update(time_ns, table.id, table.xy, table.velocity)
         seen_by = self._cameras_of_fused(fusion, seen.camera)
         cameras = [seen_by[d] if d >= 0 else [] for d in table.detection.tolist()]

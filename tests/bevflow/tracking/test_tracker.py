@@ -368,3 +368,34 @@ def test_crowd_of_walkers_is_tracked_almost_perfectly(n: int, fps: float, second
     assert scores.IDSW <= n * 0.002
     assert scores.MT == n and scores.APE < 0.08  # detections are 5 cm off, 6 cm on average
     assert len(np.unique(np.concatenate([h[0] for h in hyp_frames]))) <= n * 1.002
+
+
+# --- the Mahalanobis gate ---------------------------------------------------------------------------
+@pytest.mark.parametrize(
+    ("gate_chi2", "id_at_b"),
+    [(9.21, 2), (None, 1)],
+    ids=["gated by the prediction's uncertainty", "gated by distance alone"],
+)
+def test_a_track_whose_person_was_missed_does_not_take_a_neighbours_detection(gate_chi2, id_at_b) -> None:
+    """A (track 1) stands at x = 0 and B (track 2) at x = 0.8; in the last update A is missed and
+    a third person C appears at 1.6. By distance alone A's track takes B's detection and B's track
+    C's (two pairs under 1.5 m cost less than a track and a detection left over); within the
+    tracks' uncertainty neither pair is possible, and C gets a track of their own."""
+    tracker = Tracker(TrackerConfig(activate_hits=1, gate_chi2=gate_chi2, measurement_std_m=0.1))
+    for k in range(10):
+        tracker.update(Cylinders(xy=[[0.0, 0.0], [0.8, 0.0]]), k * 0.25)
+    last = tracker.update(Cylinders(xy=[[0.8, 0.0], [1.6, 0.0]]), 2.5)
+    assert last.id[last.detection == 0].tolist() == [id_at_b]
+
+
+def test_predicted_positions_are_where_the_tracks_will_be_without_moving_them() -> None:
+    tracker = Tracker(TrackerConfig(activate_hits=2))
+    for k in range(10):
+        tracker.update(Cylinders(xy=[[0.1 * k, 0.0]]), 0.1 * k)  # walking along +x at 1 m/s
+    tracker.update(Cylinders(xy=[[1.0, 0.0], [5.0, 5.0]]), 1.0)  # and someone new, tentative
+    before = tracker.tracks(include_tentative=True).xy.copy()
+    confirmed, every = tracker.predicted(1.2), tracker.predicted(1.2, include_tentative=True)
+    assert (len(confirmed), len(every)) == (1, 2)
+    assert 1.1 < confirmed.xy[0, 0] < 1.3
+    assert confirmed.covariance is not None and (np.linalg.eigvalsh(confirmed.covariance) > 0).all()
+    np.testing.assert_array_equal(tracker.tracks(include_tentative=True).xy, before)
