@@ -31,6 +31,7 @@ SERVICES: dict[str, str] = {
     "tracker": "fuse cameras, track people, publish tracks, occupancy and alerts",
     "gateway": "serve the REST API, websockets, the dashboard and the 3D view",
     "recorder": "write occupancy, alerts and trajectories to the history database",
+    "mqtt": "publish alerts and occupancy to an MQTT broker, none lost while it is down",
 }
 PACKAGE = "bevflow_services"
 
@@ -40,7 +41,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     epilog += "\n\n`bevflow serve SERVICE --help` lists a service's own options."
     parser = subparsers.add_parser(
         "serve",
-        help="run one service (router, ingest, detector, projector, tracker, gateway, recorder)",
+        help="run one service (router, ingest, detector, projector, tracker, gateway, recorder, mqtt)",
         description="Run one bevflow service in this process, until Ctrl-C or SIGTERM.",
         epilog=epilog,
         formatter_class=argparse.RawDescriptionHelpFormatter,

@@ -1,0 +1,143 @@
+"""``bevflow serve mqtt`` against a real broker (Debian's mosquitto, started here): alerts raised
+while the broker is down all arrive once it is back, once each and in order; occupancy is
+retained. Skipped, saying so, when mosquitto is not installed (``./run test`` installs it)."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import paho.mqtt.client as mqtt
+import pytest
+
+from bevflow.schemas import Event
+
+from bevflow_services import bus
+from bevflow_services.launcher import free_port
+from tests.services.gateway.feed import SITE_YAML, T0, S, incident, occupancy, over_capacity
+
+pytestmark = pytest.mark.e2e
+TIMEOUT_S = 30.0
+BROKER_DOWN_S = 5.0
+
+
+def mosquitto_binary() -> str:
+    found = shutil.which("mosquitto") or next((p for p in ("/usr/sbin/mosquitto",) if os.access(p, os.X_OK)), None)
+    if found is None:
+        pytest.skip("Debian's mosquitto is not installed (./run test installs it when run as root)")
+    return found
+
+
+class Broker:
+    """A mosquitto on a loopback port that keeps sessions on disk across its own restarts."""
+
+    def __init__(self, folder: Path) -> None:
+        self.binary, self.port, self.folder = mosquitto_binary(), free_port(), folder
+        config = folder / "mosquitto.conf"
+        lines = [f"listener {self.port} 127.0.0.1", "allow_anonymous true", "persistence true",
+                 f"persistence_location {folder}/", "autosave_interval 1"]
+        if os.geteuid() == 0:
+            lines.append("user root")  # as root it would switch to a 'mosquitto' user that cannot write here
+        config.write_text("\n".join(lines) + "\n")
+        self.config, self.process = config, None
+
+    def start(self) -> None:
+        log = (self.folder / "mosquitto.log").open("ab")
+        self.process = subprocess.Popen([self.binary, "-c", str(self.config)], stdout=log, stderr=subprocess.STDOUT)
+        deadline = time.monotonic() + TIMEOUT_S
+        while subprocess.run(["bash", "-c", f"exec 3<>/dev/tcp/127.0.0.1/{self.port}"], capture_output=True).returncode:
+            assert self.process.poll() is None and time.monotonic() < deadline, (self.folder / "mosquitto.log").read_text()
+            time.sleep(0.1)
+
+    def stop(self) -> None:
+        if self.process is not None and self.process.poll() is None:
+            self.process.terminate()
+            self.process.wait(10)
+
+
+class Receiver:
+    """A subscriber with a persistent session, as an integration would keep one."""
+
+    def __init__(self, port: int) -> None:
+        self.messages: list[tuple[str, bytes, bool]] = []
+        self.lock = threading.Lock()
+        self.client = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id="test-receiver", clean_session=False)
+        self.client.on_connect = lambda c, *_: c.subscribe("bevflow/#", qos=1)
+        self.client.on_message = self._on_message
+        self.client.reconnect_delay_set(1, 2)
+        self.client.connect("127.0.0.1", port)
+        self.client.loop_start()
+
+    def _on_message(self, _client, _userdata, message) -> None:
+        with self.lock:
+            self.messages.append((message.topic, message.payload, bool(message.retain)))
+
+    def alerts(self) -> list[tuple[str, dict]]:
+        with self.lock:
+            return [(t, json.loads(p)) for t, p, _ in self.messages if "/alerts/" in t]
+
+    def wait_for_alerts(self, n: int) -> list[tuple[str, dict]]:
+        deadline = time.monotonic() + TIMEOUT_S
+        while len(self.alerts()) < n:
+            assert time.monotonic() < deadline, f"{len(self.alerts())} of {n} alerts arrived: {self.alerts()}"
+            time.sleep(0.1)
+        time.sleep(1.0)  # and no more than those
+        return self.alerts()
+
+    def close(self) -> None:
+        self.client.disconnect()
+        self.client.loop_stop()
+
+
+def test_alerts_raised_while_the_broker_is_down_arrive_once_in_order(tmp_path: Path) -> None:
+    broker = Broker(tmp_path)
+    broker.start()
+    site = tmp_path / "site.yaml"
+    site.write_text(SITE_YAML)
+    hub = f"tcp/127.0.0.1:{free_port()}"
+    with (tmp_path / "mqtt.log").open("wb") as log:
+        service = subprocess.Popen([sys.executable, "-m", "bevflow_services.cli", "serve", "mqtt", "--site", str(site),
+                                    "--listen", hub, "--broker", f"mqtt://127.0.0.1:{broker.port}",
+                                    "--outbox", str(tmp_path / "outbox.db")], stdout=log, stderr=subprocess.STDOUT)
+    receiver = Receiver(broker.port)
+    session = bus.open_session(bus.BusConfig(connect=(hub,)))
+    events = bus.Publication(session, bus.Keys("hall").events, bus.JsonCodec(Event, "Event"))
+    occupancy_out = bus.Publication(session, bus.Keys("hall").occupancy, bus.JsonCodec(type(occupancy(T0, 0))))
+    try:
+        assert events.wait_for_subscribers(TIMEOUT_S), (tmp_path / "mqtt.log").read_text()
+        raised = [incident("i1", T0), over_capacity("c1", T0 + S), incident("i1", T0, end_ns=T0 + 2 * S)]
+        for event in raised:
+            events.put(event)
+        occupancy_out.put(occupancy(T0, total=7, gate=4))
+        assert len(receiver.wait_for_alerts(3)) == 3
+
+        broker.stop()
+        later = [incident(f"down-{k}", T0 + (10 + k) * S, zone=None if k % 2 else "gate") for k in range(5)]
+        for event in later:
+            events.put(event)
+            time.sleep(BROKER_DOWN_S / len(later))
+        broker.start()
+
+        got = receiver.wait_for_alerts(len(raised) + len(later))
+        sent = [(e.id, e.end_ns) for e in raised + later]
+        assert [(m["id"], m["end_ns"]) for _, m in got] == sent  # every one, once, in order
+        assert got[0][0] == "bevflow/hall/alerts/gate/distance_incident"
+        assert got[-2][0] == "bevflow/hall/alerts/site/distance_incident"
+        with receiver.lock:
+            retained = {t: p for t, p, _ in receiver.messages if t.endswith("occupancy")}
+        assert retained["bevflow/hall/zones/gate/occupancy"] == b"4"
+        assert json.loads(retained["bevflow/hall/occupancy"])["total"] == 7
+    finally:
+        events.close()
+        occupancy_out.close()
+        session.close()
+        receiver.close()
+        service.terminate()
+        service.wait(10)
+        broker.stop()
