@@ -23,6 +23,7 @@ and was minor, so nobody needs to confirm having seen it.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -166,29 +167,41 @@ class IncidentTracker:
     def _groups(self, pairs: IntArray, ids: IntArray, xy: FloatArray) -> list[_Group]:
         row = {int(i): r for r, i in enumerate(ids.tolist())}
         known = [p for p in pairs.tolist() if p[0] in row and p[1] in row]
-        groups = []
-        for members in connected_groups(np.array(known, dtype=np.int64)):
-            rows = [row[m] for m in members]
-            linked = [p for p in known if p[0] in members]
-            d = min(float(np.hypot(*(xy[row[a]] - xy[row[b]]))) for a, b in linked)
-            cx, cy = xy[rows].mean(axis=0).tolist()
-            groups.append(_Group(frozenset(members), (cx, cy), d))
-        return groups
+        if not known:
+            return []
+        components = connected_groups(np.array(known, dtype=np.int64))
+        group_of = {m: g for g, members in enumerate(components) for m in members}
+        # Each group's closest pair, for all pairs at once: a crowd's tick has thousands of them.
+        a, b = (np.array([row[p[k]] for p in known]) for k in (0, 1))
+        closest = np.full(len(components), np.inf)
+        np.minimum.at(closest, [group_of[p[0]] for p in known], np.hypot(*(xy[a] - xy[b]).T))
+        people = [row[m] for members in components for m in members]
+        which = np.repeat(np.arange(len(components)), [len(members) for members in components])
+        centre = np.stack([np.bincount(which, weights=xy[people, k]) for k in (0, 1)], axis=1)
+        centre /= np.bincount(which)[:, None]
+        return [_Group(frozenset(members), (cx, cy), d)
+                for members, (cx, cy), d in zip(components, centre.tolist(), closest.tolist())]
 
     def _follow(self, groups: list[_Group], t: int) -> None:
         """Give each group its candidate (continued, merged or new), largest groups first."""
         claimed: set[int] = set()
+        by_member: dict[int, list[_Candidate]] = {}  # the candidates each person is in, oldest first
+        for c in self._candidates:
+            for m in c.members:
+                by_member.setdefault(m, []).append(c)
         for group in sorted(groups, key=lambda g: -len(g.members)):
-            touching = [c for c in self._candidates if c.key not in claimed and c.members & group.members]
+            found = {c.key: c for m in group.members for c in by_member.get(m, ()) if c.key not in claimed}
+            touching = [found[k] for k in sorted(found)]
             if not touching:
                 touching = [c for c in self._candidates if c.key not in claimed and c.last_active_ns != t
-                            and np.hypot(c.centre[0] - group.centre[0], c.centre[1] - group.centre[1]) <= self.limit_m][:1]
+                            and math.hypot(c.centre[0] - group.centre[0], c.centre[1] - group.centre[1]) <= self.limit_m][:1]
             if touching:
                 keep = min(touching, key=lambda c: (not c.open, c.start_ns, c.key))
                 for other in touching:
                     if other is not keep:
                         keep.merge(other)
                         self._candidates.remove(other)
+                        claimed.add(other.key)  # gone: no later group may find it
                         if other.open:
                             self._merged.append(other)
             else:
