@@ -35,7 +35,7 @@ examples:
   bevflow healthcheck gateway --url https://127.0.0.1:8000/api/health
   bevflow healthcheck tracker --site /config/site.yaml --mode client --connect tcp/router:7447
   bevflow healthcheck container     # in a container whose command is `bevflow serve ...`"""
-BUS_SERVICES = ("ingest", "detector", "projector", "tracker", "recorder", "mqtt")
+BUS_SERVICES = ("ingest", "detector", "projector", "tracker", "recorder", "mqtt", "webhook")
 # A gateway that answers at all is alive; 503 only says the site it watches is not ok.
 ALIVE_HTTP_CODES = (200, 503)
 

@@ -32,6 +32,7 @@ SERVICES: dict[str, str] = {
     "gateway": "serve the REST API, websockets, the dashboard and the 3D view",
     "recorder": "write occupancy, alerts and trajectories to the history database",
     "mqtt": "publish alerts and occupancy to an MQTT broker, none lost while it is down",
+    "webhook": "POST alerts to a URL, signed, retried until delivered",
 }
 PACKAGE = "bevflow_services"
 
@@ -41,7 +42,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     epilog += "\n\n`bevflow serve SERVICE --help` lists a service's own options."
     parser = subparsers.add_parser(
         "serve",
-        help="run one service (router, ingest, detector, projector, tracker, gateway, recorder, mqtt)",
+        help="run one service (router, ingest, detector, projector, tracker, gateway, recorder, mqtt, webhook)",
         description="Run one bevflow service in this process, until Ctrl-C or SIGTERM.",
         epilog=epilog,
         formatter_class=argparse.RawDescriptionHelpFormatter,

@@ -21,7 +21,6 @@ from __future__ import annotations
 import argparse
 import logging
 import os
-import threading
 from pathlib import Path
 
 from bevflow.schemas import FEED_EVENT_TYPES, EVENT_TYPES, AlertMessage, Event, Occupancy
@@ -30,7 +29,7 @@ from bevflow_services import bus
 from bevflow_services.cli import UserError
 from bevflow_services.cli.serve import service_site, stop_on_signals
 from bevflow_services.mqtt.broker import BrokerAddress, Latest, Reliable
-from bevflow_services.mqtt.outbox import Outbox
+from bevflow_services.outbox import Outbox, deliver
 
 log = logging.getLogger(__name__)
 SERVICE = "mqtt"
@@ -103,7 +102,7 @@ def main(args: argparse.Namespace) -> int:
           f"{outbox.backlog()} alerts waiting in {args.outbox}", flush=True)
     try:
         with stop_on_signals() as stop:
-            deliver(outbox, reliable, stop)
+            deliver(outbox, lambda message, stop_: reliable.send(message.topic, message.payload, stop_), stop)
     finally:
         token.undeclare()
         for subscription in subscriptions:
@@ -115,10 +114,3 @@ def main(args: argparse.Namespace) -> int:
         outbox.close()
     return 0
 
-
-def deliver(outbox: Outbox, reliable: Reliable, stop: threading.Event) -> None:
-    """Send the outbox, oldest first, each once the one before it was acknowledged."""
-    while not stop.is_set():
-        message = outbox.next(timeout=0.5)
-        if message is not None and reliable.send(message.topic, message.payload, stop):
-            outbox.mark_sent(message.seq)

@@ -111,4 +111,4 @@ def test_registered_command_hands_the_rest_of_the_line_to_the_service():
 
 
 def test_every_service_is_listed():
-    assert list(serve.SERVICES) == ["router", "ingest", "detector", "projector", "tracker", "gateway", "recorder", "mqtt"]
+    assert list(serve.SERVICES) == ["router", "ingest", "detector", "projector", "tracker", "gateway", "recorder", "mqtt", "webhook"]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import threading
 
-from bevflow_services.mqtt.outbox import Outbox
+from bevflow_services.outbox import Outbox
 
 
 def test_messages_come_out_in_order_once_and_survive_a_restart(tmp_path) -> None:

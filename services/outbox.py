@@ -1,10 +1,10 @@
-"""A persistent, ordered queue of MQTT messages in a SQLite file, so no alert is lost while the
-broker is unreachable or the service restarts.
+"""A persistent, ordered queue of outgoing alerts in a SQLite file, so none is lost while their
+receiver (an MQTT broker, a webhook) is unreachable or the sending service restarts.
 
-Messages go out oldest first; one is marked sent only once the broker acknowledged it. A message
-already in the outbox (the same topic and payload: the bus may deliver an event twice) is not
-queued again, and sent messages are kept a while (``keep_s``) so a late duplicate still finds
-its twin. Across a crash between the broker's acknowledgement and the mark, a message can go out
+Messages go out oldest first; one is marked sent only once the receiver acknowledged it. A
+message already in the outbox (the same topic and payload: the bus may deliver an event twice)
+is not queued again, and sent messages are kept a while (``keep_s``) so a late duplicate still
+finds its twin. Across a crash between the acknowledgement and the mark, a message can go out
 twice (at least once); otherwise each goes out once, in order.
 """
 
@@ -14,6 +14,7 @@ import hashlib
 import sqlite3
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -80,10 +81,19 @@ class Outbox:
             self._db.execute("DELETE FROM outbox WHERE sent_ns IS NOT NULL AND sent_ns < ?", (now - self.keep_ns,))
 
     def backlog(self) -> int:
-        """Messages not yet acknowledged by the broker."""
+        """Messages not yet acknowledged by their receiver."""
         with self._lock:
             return self._db.execute("SELECT count(*) FROM outbox WHERE sent_ns IS NULL").fetchone()[0]
 
     def close(self) -> None:
         with self._lock:
             self._db.close()
+
+
+def deliver(outbox: Outbox, send: Callable[[Message, threading.Event], bool], stop: threading.Event) -> None:
+    """Send the outbox, oldest first, each once the one before it was acknowledged:
+    ``send(message, stop)`` returns True once the receiver has it, False if ``stop`` came first."""
+    while not stop.is_set():
+        message = outbox.next(timeout=0.5)
+        if message is not None and send(message, stop):
+            outbox.mark_sent(message.seq)

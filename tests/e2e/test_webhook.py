@@ -1,0 +1,109 @@
+"""``bevflow serve webhook`` against a local receiver: alerts raised while the receiver is down,
+or while it answers 500, all arrive once it is back, once each, in order, signed."""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+import http.server
+import json
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from bevflow.schemas import Event
+
+from bevflow_services import bus
+from bevflow_services.launcher import free_port
+from tests.services.gateway.feed import SITE_YAML, T0, S, incident, over_capacity
+
+pytestmark = pytest.mark.e2e
+TIMEOUT_S = 30.0
+SECRET = b"shared-secret"
+RECEIVER_DOWN_S = 4.0
+
+
+class Receiver:
+    """An HTTP endpoint that records signed POSTs; ``fail_next`` answers 500 that many times."""
+
+    def __init__(self, port: int) -> None:
+        self.port, self.bodies, self.fail_next, self.server = port, [], 0, None
+        self.lock = threading.Lock()
+
+    def start(self) -> None:
+        receiver = self
+
+        class Handler(http.server.BaseHTTPRequestHandler):
+            def do_POST(self) -> None:
+                body = self.rfile.read(int(self.headers["Content-Length"]))
+                expected = "sha256=" + hmac.new(SECRET, body, hashlib.sha256).hexdigest()
+                with receiver.lock:
+                    failing = receiver.fail_next > 0
+                    receiver.fail_next -= failing
+                    if not failing and self.headers["X-Bevflow-Signature"] == expected:
+                        receiver.bodies.append(json.loads(body))
+                self.send_response(500 if failing else 204)
+                self.end_headers()
+
+            def log_message(self, *_args) -> None:
+                pass
+
+        self.server = http.server.ThreadingHTTPServer(("127.0.0.1", self.port), Handler)
+        threading.Thread(target=self.server.serve_forever, daemon=True).start()
+
+    def stop(self) -> None:
+        self.server.shutdown()
+        self.server.server_close()
+
+    def wait_for(self, n: int) -> list[dict]:
+        deadline = time.monotonic() + TIMEOUT_S
+        while len(self.bodies) < n:
+            assert time.monotonic() < deadline, f"{len(self.bodies)} of {n} alerts arrived"
+            time.sleep(0.1)
+        time.sleep(1.0)  # and no more than those
+        with self.lock:
+            return list(self.bodies)
+
+
+def test_alerts_arrive_once_in_order_across_a_receiver_outage(tmp_path: Path) -> None:
+    receiver = Receiver(free_port())
+    receiver.start()
+    site, secret = tmp_path / "site.yaml", tmp_path / "secret"
+    site.write_text(SITE_YAML)
+    secret.write_bytes(SECRET + b"\n")
+    hub = f"tcp/127.0.0.1:{free_port()}"
+    with (tmp_path / "webhook.log").open("wb") as log:
+        service = subprocess.Popen([sys.executable, "-m", "bevflow_services.cli", "serve", "webhook", "--site", str(site),
+                                    "--listen", hub, "--url", f"http://127.0.0.1:{receiver.port}/alerts",
+                                    "--secret-file", str(secret), "--outbox", str(tmp_path / "outbox.db")],
+                                   stdout=log, stderr=subprocess.STDOUT)
+    session = bus.open_session(bus.BusConfig(connect=(hub,)))
+    events = bus.Publication(session, bus.Keys("hall").events, bus.JsonCodec(Event, "Event"))
+    try:
+        assert events.wait_for_subscribers(TIMEOUT_S), (tmp_path / "webhook.log").read_text()
+        receiver.fail_next = 2  # the first alert is refused twice, then taken
+        raised = [incident("i1", T0), over_capacity("c1", T0 + S), incident("i1", T0, end_ns=T0 + 2 * S)]
+        for event in raised:
+            events.put(event)
+        assert len(receiver.wait_for(3)) == 3
+
+        receiver.stop()
+        later = [incident(f"down-{k}", T0 + (10 + k) * S) for k in range(5)]
+        for event in later:
+            events.put(event)
+            time.sleep(RECEIVER_DOWN_S / len(later))
+        receiver.start()
+
+        got = receiver.wait_for(len(raised) + len(later))
+        assert [(b["id"], b["end_ns"]) for b in got] == [(e.id, e.end_ns) for e in raised + later]
+        assert "trying alert" in (tmp_path / "webhook.log").read_text()
+    finally:
+        events.close()
+        session.close()
+        service.terminate()
+        service.wait(10)
+        receiver.stop()
