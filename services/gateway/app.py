@@ -34,6 +34,7 @@ from bevflow_services.gateway.routes import auth as auth_routes
 from bevflow_services.gateway.routes import calibration as calibration_routes
 from bevflow_services.gateway.routes import history as history_routes
 from bevflow_services.gateway.routes import metrics as metrics_routes
+from bevflow_services.gateway.routes import probes
 from bevflow_services.gateway.routes import reports
 from bevflow_services.gateway.routes import site as site_routes
 from bevflow_services.gateway.routes import users as users_routes
@@ -144,12 +145,12 @@ def create_app(
 
     # Who may call what. Routes that trace a person (a track's path and contacts, track
     # summaries) and acknowledging alerts need the operator role on the route itself; the
-    # streams check their clients themselves; health answers anyone, for load balancers.
+    # streams check their clients themselves; health and the probes answer anyone, for load balancers.
     viewer, admin = [Depends(require_role("viewer"))], [Depends(require_role("admin"))]
     for module in (occupancy, intervals, tracks, alerts, cameras, site_routes, history_routes, reports, metrics_routes):
         app.include_router(module.router, dependencies=viewer)
     app.include_router(calibration_routes.router, dependencies=admin)
-    for module in (health, streams, acknowledge, auth_routes, users_routes):
+    for module in (health, probes, streams, acknowledge, auth_routes, users_routes):
         app.include_router(module.router)
     app.add_exception_handler(RequestValidationError, _validation_error)
     add_security_middleware(app, access.cors_origins, hsts=access.secure_cookies)

@@ -42,6 +42,8 @@ ROUTE_ROLES = {
     ("GET", "/api/calibration/consistency"): "admin",
     ("GET", "/api/calibration/drift"): "admin",
     ("GET", "/api/health"): "public",
+    ("GET", "/healthz"): "public",
+    ("GET", "/readyz"): "public",
     ("POST", "/api/alerts/{alert_id}/acknowledge"): "operator",
     ("POST", "/api/alerts/acknowledge"): "operator",
     ("GET", "/api/acknowledgements"): "viewer",
