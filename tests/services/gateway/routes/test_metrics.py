@@ -1,6 +1,11 @@
-"""``/metrics``: Prometheus text with the same counters as ``/api/health`` and ``/api/cameras``."""
+"""``/metrics``: Prometheus text with the same counters as ``/api/health`` and ``/api/cameras``,
+and the Grafana dashboard in docker/ asking only for series that exist."""
 
 from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
 
 from fastapi.testclient import TestClient
 from prometheus_client.parser import text_string_to_metric_families
@@ -87,3 +92,17 @@ def test_metrics_need_a_viewer_token(site: Site, state: GatewayState) -> None:
     with secured_client(site, state) as (client, secure):
         assert client.get("/metrics").status_code == 401
         assert scrape(client, headers={"Authorization": f"Bearer {secure.tokens['viewer']}"})
+
+
+def test_the_grafana_dashboard_asks_only_for_series_that_exist(client: TestClient, state: GatewayState) -> None:
+    state.apply(tracks(T0, {1: (0.0, 0.0)}))
+    state.apply(tracks(T0 + S // 10, {1: (0.0, 0.0)}))
+    state.apply(occupancy(T0, total=1))
+    client.app.state.bus_stats = BusStats()  # type: ignore[attr-defined]
+    suffixes = {"counter": ("",), "summary": ("_sum", "_count"), "gauge": ("",)}  # counters' TYPE has _total
+    served = {name + suffix for name, kind in re.findall(r"^# TYPE (\S+) (\w+)$", client.get("/metrics").text, re.M)
+              for suffix in suffixes[kind]}  # every family, with or without samples now
+    dashboard = json.loads((Path(__file__).resolve().parents[4] / "docker" / "grafana-dashboard.json").read_text())
+    asked = {name for panel in dashboard["panels"] for target in panel["targets"]
+             for name in re.findall(r"\bbevflow_[a-z_]+", target["expr"])}
+    assert asked and asked <= served, sorted(asked - served)
