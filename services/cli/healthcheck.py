@@ -22,6 +22,7 @@ from pathlib import Path
 
 from bevflow_services import bus
 from bevflow_services.cli import UserError
+from bevflow_services.cli.environment import apply_environment
 from bevflow_services.cli.serve import service_site
 
 EPILOG = """what "up" means:
@@ -144,6 +145,7 @@ def probe_argv(command: list[str]) -> list[str]:
     seen = argparse.ArgumentParser(add_help=False, allow_abbrev=False)
     for flags, kwargs in SERVE_FLAGS:
         seen.add_argument(*flags, **kwargs)
+    apply_environment(seen)  # the service read its BEVFLOW_* variables too; this runs with the same
     flags, _ = seen.parse_known_args(rest)
     if service == "router":
         port = flags.listen[0].rsplit(":", 1)[1] if flags.listen else "7447"
@@ -153,7 +155,7 @@ def probe_argv(command: list[str]) -> list[str]:
         host = f"[{host}]" if ":" in host else host
         scheme = "https" if flags.tls_cert else "http"
         return ["gateway", "--url", f"{scheme}://{host}:{flags.port}/api/health"]
-    argv = [service, "--site", flags.site or "", "--mode", flags.mode]
+    argv = [service, "--mode", flags.mode] + (["--site", flags.site] if flags.site else [])
     argv += [f"--connect={endpoint}" for endpoint in flags.connect]
     return argv + ([f"--zenoh-config={flags.zenoh_config}"] if flags.zenoh_config else [])
 

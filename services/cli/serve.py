@@ -21,7 +21,7 @@ from types import ModuleType
 from bevflow.site import Site, SiteError, load_site_or_builtin
 
 from bevflow_services import bus, redact
-from bevflow_services.cli import UserError
+from bevflow_services.cli import UserError, environment
 
 SERVICES: dict[str, str] = {
     "router": "route messages between hosts and client-mode services (a Zenoh router)",
@@ -92,7 +92,8 @@ def load_service(name: str, *, package: str = PACKAGE) -> ModuleType:
 def service_parser(name: str, module: ModuleType) -> argparse.ArgumentParser:
     """The command line of ``bevflow serve NAME``: common flags plus the service's own."""
     first_paragraph = (module.__doc__ or SERVICES.get(name, "")).strip().split("\n\n")[0]
-    parser = argparse.ArgumentParser(prog=f"bevflow serve {name}", description=" ".join(first_paragraph.split()))
+    parser = argparse.ArgumentParser(prog=f"bevflow serve {name}", description=" ".join(first_paragraph.split()),
+                                     epilog=environment.environment_help())
     is_router = name == "router"
     if not is_router:
         parser.add_argument("--site", required=True,
@@ -108,6 +109,7 @@ def service_parser(name: str, module: ModuleType) -> argparse.ArgumentParser:
     if add_arguments is not None:
         add_arguments(parser)
     parser.set_defaults(service=name)
+    environment.apply_environment(parser)
     return parser
 
 

@@ -25,10 +25,19 @@ from bevflow_services.launcher import free_port
      ["gateway", "--url", "https://10.0.0.2:8000/api/health"]),
     (["bevflow", "serve", "tracker", "--site", "s.yaml", "--mode", "client", "-e", "tcp/router:7447",
       "--id-file", "/data/id", "--host-name-like-flag", "x"],
-     ["tracker", "--site", "s.yaml", "--mode", "client", "--connect=tcp/router:7447"]),
+     ["tracker", "--mode", "client", "--site", "s.yaml", "--connect=tcp/router:7447"]),
 ])
 def test_probe_from_serve_command_line(command, probe) -> None:
     assert probe_argv(command) == probe
+
+
+def test_probe_reads_what_the_service_took_from_its_environment(monkeypatch) -> None:
+    monkeypatch.setenv("BEVFLOW_SITE", "/config/site.yaml")
+    monkeypatch.setenv("BEVFLOW_CONNECT", "tcp/router:7447")
+    monkeypatch.setenv("BEVFLOW_PORT", "9000")
+    assert probe_argv(["bevflow", "serve", "projector", "--mode", "client"]) == \
+        ["projector", "--mode", "client", "--site", "/config/site.yaml", "--connect=tcp/router:7447"]
+    assert probe_argv(["bevflow", "serve", "gateway"]) == ["gateway", "--url", "http://127.0.0.1:9000/api/health"]
 
 
 def test_probe_refuses_a_process_that_is_no_service() -> None:
