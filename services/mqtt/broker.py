@@ -104,7 +104,18 @@ class Reliable(_Connection):
 
 class Latest(_Connection):
     """Retained QoS 0: the broker keeps the newest for subscribers that come later; an update
-    made while the broker is unreachable is dropped (the next one replaces it anyway)."""
+    made while the broker is unreachable is dropped (the next one replaces it anyway).
+    ``on_connect`` messages (Home Assistant discovery) are published again at every connection."""
+
+    def __init__(self, address: BrokerAddress, client_id: str, on_connect: list[tuple[str, bytes]] = ()) -> None:
+        self.announce = list(on_connect)
+        super().__init__(address, client_id)
+
+    def _on_connect(self, client, userdata, flags, reason, properties) -> None:
+        super()._on_connect(client, userdata, flags, reason, properties)
+        if not reason.is_failure:
+            for topic, payload in self.announce:
+                self.client.publish(topic, payload, qos=1, retain=True)
 
     def send(self, topic: str, payload: bytes) -> None:
         if self.connected.is_set():

@@ -10,6 +10,9 @@ Topics, under ``--topic-prefix`` (default ``bevflow``) and the site's bus name:
     bevflow/SITE/occupancy            the newest Occupancy message (JSON); retained
     bevflow/SITE/zones/ZONE/occupancy the newest count of each zone; retained
 
+With ``--home-assistant``, the site's and each zone's occupancy are announced as Home Assistant
+sensors (retained config messages under ``--discovery-prefix``, sent again at each connection).
+
 No alert is lost while the broker is down or this service restarts: each is written to the
 outbox (a SQLite file) before it is sent, and sent oldest first, one at a time, until the broker
 acknowledges it. Alerts the service missed while it was down come back from the tracker's cache
@@ -29,6 +32,7 @@ from bevflow_services import bus
 from bevflow_services.cli import UserError
 from bevflow_services.cli.serve import service_site, stop_on_signals
 from bevflow_services.mqtt.broker import BrokerAddress, Latest, Reliable
+from bevflow_services.mqtt.discovery import discovery_messages
 from bevflow_services.outbox import Outbox, deliver
 
 log = logging.getLogger(__name__)
@@ -45,6 +49,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--outbox", required=True, type=Path, metavar="FILE",
                        help="SQLite file that keeps alerts until the broker has them (created if missing)")
     group.add_argument("--topic-prefix", default="bevflow", help="first level of every topic (default bevflow)")
+    group.add_argument("--home-assistant", action="store_true",
+                       help="announce the site's and each zone's occupancy as Home Assistant sensors (MQTT discovery)")
+    group.add_argument("--discovery-prefix", default="homeassistant",
+                       help="Home Assistant's discovery prefix (default homeassistant)")
     group.add_argument("--types", default=",".join(FEED_EVENT_TYPES), metavar="T,T",
                        help="alert types to publish (default: all but distance_violation, the per-pair events "
                        f"that distance_incident groups; any of {', '.join(EVENT_TYPES)})")
@@ -72,15 +80,17 @@ def check_types(text: str) -> set[str]:
 
 
 def main(args: argparse.Namespace) -> int:
-    _site, site_id = service_site(args)
+    site, site_id = service_site(args)
     types = check_types(args.types)
     try:
         address = BrokerAddress.parse(args.broker, broker_password(args))
     except ValueError as exc:
         raise UserError(f"--broker: {exc}") from None
     outbox = Outbox(args.outbox)
-    reliable, latest = Reliable(address, f"bevflow-{site_id}-alerts"), Latest(address, f"bevflow-{site_id}-occupancy")
     prefix, keys = args.topic_prefix.rstrip("/"), bus.Keys(site_id)
+    discovery = discovery_messages(site, site_id, prefix, args.discovery_prefix) if args.home_assistant else []
+    reliable = Reliable(address, f"bevflow-{site_id}-alerts")
+    latest = Latest(address, f"bevflow-{site_id}-occupancy", on_connect=discovery)
 
     def on_event(event: Event) -> None:  # on a Zenoh thread
         if event.type in types:

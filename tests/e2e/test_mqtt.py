@@ -1,6 +1,6 @@
 """``bevflow serve mqtt`` against a real broker (Debian's mosquitto, started here): alerts raised
 while the broker is down all arrive once it is back, once each and in order; occupancy is
-retained. Skipped, saying so, when mosquitto is not installed (``./run test`` installs it)."""
+retained and announced to Home Assistant. Skipped, saying so, when mosquitto is not installed (``./run test`` installs it)."""
 
 from __future__ import annotations
 
@@ -68,7 +68,7 @@ class Receiver:
         self.messages: list[tuple[str, bytes, bool]] = []
         self.lock = threading.Lock()
         self.client = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id="test-receiver", clean_session=False)
-        self.client.on_connect = lambda c, *_: c.subscribe("bevflow/#", qos=1)
+        self.client.on_connect = lambda c, *_: c.subscribe([("bevflow/#", 1), ("homeassistant/#", 1)])
         self.client.on_message = self._on_message
         self.client.reconnect_delay_set(1, 2)
         self.client.connect("127.0.0.1", port)
@@ -104,7 +104,8 @@ def test_alerts_raised_while_the_broker_is_down_arrive_once_in_order(tmp_path: P
     with (tmp_path / "mqtt.log").open("wb") as log:
         service = subprocess.Popen([sys.executable, "-m", "bevflow_services.cli", "serve", "mqtt", "--site", str(site),
                                     "--listen", hub, "--broker", f"mqtt://127.0.0.1:{broker.port}",
-                                    "--outbox", str(tmp_path / "outbox.db")], stdout=log, stderr=subprocess.STDOUT)
+                                    "--outbox", str(tmp_path / "outbox.db"), "--home-assistant"],
+                                   stdout=log, stderr=subprocess.STDOUT)
     receiver = Receiver(broker.port)
     session = bus.open_session(bus.BusConfig(connect=(hub,)))
     events = bus.Publication(session, bus.Keys("hall").events, bus.JsonCodec(Event, "Event"))
@@ -133,6 +134,11 @@ def test_alerts_raised_while_the_broker_is_down_arrive_once_in_order(tmp_path: P
             retained = {t: p for t, p, _ in receiver.messages if t.endswith("occupancy")}
         assert retained["bevflow/hall/zones/gate/occupancy"] == b"4"
         assert json.loads(retained["bevflow/hall/occupancy"])["total"] == 7
+        with receiver.lock:
+            configs = {t: json.loads(p) for t, p, _ in receiver.messages if t.startswith("homeassistant/")}
+        gate = configs["homeassistant/sensor/bevflow_hall/gate_occupancy/config"]
+        assert gate["state_topic"] == "bevflow/hall/zones/gate/occupancy" and gate["unit_of_measurement"] == "people"
+        assert configs["homeassistant/sensor/bevflow_hall/site_occupancy/config"]["value_template"] == "{{ value_json.total }}"
     finally:
         events.close()
         occupancy_out.close()
