@@ -14,13 +14,10 @@ service) and polls REST. Afterwards:
 
 from __future__ import annotations
 
-import json
 import os
 import signal
 import threading
 import time
-import urllib.error
-import urllib.request
 from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,6 +31,7 @@ from bevflow.site import dump_site
 from bevflow_services import bus
 from bevflow_services.benchmarks.live import hall_site
 from bevflow_services.launcher import Child, ServiceGroup, free_port
+from tests.e2e.http import get_json
 
 pytestmark = [pytest.mark.e2e, pytest.mark.slow]
 PEOPLE = 16
@@ -157,16 +155,6 @@ class RestPoller:
     def close(self) -> None:
         self.stop.set()
         self.thread.join()
-
-
-def get_json(url: str, timeout: float = 5.0) -> Any:
-    try:
-        with urllib.request.urlopen(url, timeout=timeout) as response:
-            return json.loads(response.read())
-    except urllib.error.HTTPError as exc:
-        if exc.code != 503:  # /api/health while the site is not ok, with its whole body
-            raise
-        return json.loads(exc.read())
 
 
 def wait_until(condition, timeout_s: float, what: str, group: ServiceGroup) -> None:

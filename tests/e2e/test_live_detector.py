@@ -4,11 +4,8 @@ against the simulator's ground truth; garbage frames on the bus do not stop the 
 
 from __future__ import annotations
 
-import json
 import threading
 import time
-import urllib.error
-import urllib.request
 from pathlib import Path
 
 import numpy as np
@@ -19,22 +16,13 @@ from bevflow.site import dump_site, load_site_or_builtin
 
 from bevflow_services import bus
 from bevflow_services.launcher import ServiceGroup, free_port, start_pipeline
+from tests.e2e.http import get_json
 
 pytestmark = pytest.mark.e2e
 PEOPLE = 8
 SITE_ID = "e2e-detector"
 SERVED = ("hall-1", "hall-2")
 SPARE = "spare"
-
-
-def get_json(url: str) -> dict | list:
-    try:
-        with urllib.request.urlopen(url, timeout=5) as response:
-            return json.loads(response.read())
-    except urllib.error.HTTPError as exc:
-        if exc.code != 503:  # /api/health while the site is not ok, with its whole body
-            raise
-        return json.loads(exc.read())
 
 
 def two_camera_hall() -> str:

@@ -18,19 +18,10 @@ from bevflow.schemas import CameraCylinders, Detections2D, SimulatedTruth
 
 from bevflow_services import bus
 from bevflow_services.launcher import ServiceGroup, free_port, start_pipeline
+from tests.e2e.http import get_json
 
 pytestmark = pytest.mark.e2e
 PEOPLE = 24
-
-
-def get_json(url: str) -> dict:
-    try:
-        with urllib.request.urlopen(url, timeout=5) as response:
-            return json.loads(response.read())
-    except urllib.error.HTTPError as exc:
-        if exc.code != 503:  # /api/health while the site is not ok, with its whole body
-            raise
-        return json.loads(exc.read())
 
 
 class TruthLog:
