@@ -36,7 +36,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add.add_argument("name")
     add.add_argument("--role", choices=ROLES, required=True)
     add.add_argument("--password-stdin", action="store_true", help="read the password from the first line of stdin")
-    passwd = actions.add_parser("password", help="set a user's password (ends their dashboard sessions)")
+    passwd = actions.add_parser("password", help="set a user's password (ends their dashboard sessions and API tokens)")
     passwd.add_argument("name")
     passwd.add_argument("--password-stdin", action="store_true", help="read the password from the first line of stdin")
     actions.add_parser("list", help="list users, their roles and their API tokens")
@@ -79,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"added {user.name} ({user.role})")
         elif args.action == "password":
             store.set_password(args.name, access.hash_password(read_password(args.password_stdin)))
-            print(f"password of {args.name} changed; their dashboard sessions ended")
+            print(f"password of {args.name} changed; their dashboard sessions and API tokens ended")
         elif args.action == "list":
             tokens = store.tokens()
             for user in store.users():

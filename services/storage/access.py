@@ -118,13 +118,16 @@ class AccessStore(Database):
         return int(self.backend.query("SELECT COUNT(*) FROM users")[0][0])
 
     def set_password(self, name: str, password_hash: str) -> None:
-        """Replace ``name``'s password hash and end their sessions; ``KeyError`` if no such user."""
+        """Replace ``name``'s password hash and end their sessions and API tokens (a changed password
+        is often a suspected leak, and a token made by whoever knew the old one must not outlive
+        it); ``KeyError`` if no such user."""
         if self.user(name) is None:
             raise KeyError(f"no user {name!r}")
         with self.backend.transaction() as tx:
             if not tx.rowcount("UPDATE users SET password_hash = ? WHERE name = ?", [password_hash, name]):
                 raise KeyError(f"no user {name!r}")
             tx.execute("DELETE FROM sessions WHERE user_name = ?", [name])
+            tx.execute("DELETE FROM api_tokens WHERE user_name = ?", [name])
 
     def set_role(self, name: str, role: str) -> None:
         check_role(role)

@@ -38,6 +38,8 @@ router = APIRouter()
 REPLAY_CHOICES = ("none", "active")
 # What sending to a client that has just gone away raises, depending on the server.
 CLIENT_GONE = (WebSocketDisconnect, OSError, RuntimeError)
+# How often an open stream's credential is checked again: revoking it ends the stream within this.
+RECHECK_S = 0.5
 
 
 class AlertFilter:
@@ -97,14 +99,31 @@ def same_origin(websocket: WebSocket) -> bool:
     return origin.split("://", 1)[-1].rstrip("/") == websocket.headers.get("host", "")
 
 
+async def until_revoked(websocket: WebSocket, role: str = "viewer") -> None:
+    """Return once the client's credential no longer grants ``role`` (its token revoked, its user
+    removed or demoted, its password changed, its session ended or expired), closing the socket
+    with 1008. The check was made once at the handshake; repeating it is what ends a stream that
+    was opened before access was taken away, whichever process took it (the gateway or
+    ``bevflow users`` on the database)."""
+    access = get_access(websocket)
+    while True:
+        await asyncio.sleep(RECHECK_S)
+        principal = await asyncio.to_thread(access.principal, websocket)  # a database query
+        if principal is None or not principal.can(role):
+            await websocket.close(code=1008, reason="access revoked or expired")
+            return
+
+
 async def serve(websocket: WebSocket, sub: Subscription[Any], send: Callable[[Any], Awaitable[None]]) -> None:
-    """Forward ``sub`` to the client until it disconnects; its reads are only watched for closing."""
+    """Forward ``sub`` to the client until it disconnects or loses access; its reads are only
+    watched for closing."""
 
     async def until_closed() -> None:
         while (await websocket.receive())["type"] != "websocket.disconnect":
             pass
 
-    tasks = [asyncio.create_task(pump(sub, send)), asyncio.create_task(until_closed())]
+    tasks = [asyncio.create_task(pump(sub, send)), asyncio.create_task(until_closed()),
+             asyncio.create_task(until_revoked(websocket))]
     try:
         await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
     finally:

@@ -84,8 +84,10 @@ def test_secrets_are_stored_only_as_digests(store: AccessStore) -> None:
 def test_a_new_password_or_removal_ends_sessions_and_tokens(store: AccessStore) -> None:
     store.add_user("ana", "operator", "h", T0)
     store.add_session("s1", "ana", T0, T0 + 100 * S)
+    store.add_token("t0", "ana", "made with the old password", T0)
     store.set_password("ana", "h2")
     assert store.session_user("s1", T0) is None
+    assert store.token_user("t0") is None
     assert store.user("ana").password_hash == "h2"
     store.add_token("t1", "ana", "ci", T0)
     assert store.token_user("t1").name == "ana"
