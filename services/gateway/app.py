@@ -27,7 +27,8 @@ from bevflow.schemas import AlertMessage, Tracks
 from bevflow.site import Site
 
 from bevflow_services.gateway.api_docs import add_api_docs
-from bevflow_services.gateway.auth import Access, get_access, require_role
+from bevflow_services.gateway.auth import Access, HashingBusy, get_access, require_role
+from bevflow_services.gateway.body_limit import BodyLimit
 from bevflow_services.gateway.auth_headers import add_security_middleware
 from bevflow_services.gateway.routes import acknowledge, alerts, cameras, health, intervals, occupancy, streams, tracks
 from bevflow_services.gateway.routes import auth as auth_routes
@@ -153,6 +154,8 @@ def create_app(
     for module in (health, probes, streams, acknowledge, auth_routes, users_routes):
         app.include_router(module.router)
     app.add_exception_handler(RequestValidationError, _validation_error)
+    app.add_exception_handler(HashingBusy, _hashing_busy)
+    app.add_middleware(BodyLimit)
     add_security_middleware(app, access.cors_origins, hsts=access.secure_cookies)
     add_api_docs(app, app.title)
     _serve_dashboard(app, dashboard)
@@ -169,6 +172,11 @@ async def _validation_error(request: Request, exc: Exception) -> JSONResponse:
     kind = first["loc"][0] if first["loc"] else "request"
     message = f"{kind} parameter {where}: {first['msg']}"
     return JSONResponse(status_code=422, content={"message": message, "detail": jsonable_encoder(errors)})
+
+
+async def _hashing_busy(request: Request, exc: Exception) -> JSONResponse:
+    """503 at once when every password-hashing slot is taken (a login flood), instead of queueing."""
+    return JSONResponse(status_code=503, content={"detail": str(exc)}, headers={"Retry-After": "1"})
 
 
 # The dashboard's pages and the role each needs; their scripts and styles are public (they hold

@@ -21,8 +21,10 @@ import hmac
 import ipaddress
 import logging
 import secrets
+import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Annotated
 
@@ -41,6 +43,10 @@ TOKEN_PREFIX = "bvf_"
 LOCAL_USER = "local"  # who every request is when access control is off
 MIN_PASSWORD = 10
 NS = 1_000_000_000
+# Passwords hashed or checked at once. Each argon2 call takes 64 MiB and a core for a fraction of
+# a second; beyond this many a login is refused at once (503) rather than queued, so a flood of
+# logins cannot take every worker thread and gigabytes of memory from the people using the site.
+HASHING_SLOTS = 2
 
 
 def role_rank(role: str) -> int:
@@ -57,6 +63,10 @@ class Principal:
 
     def can(self, role: str) -> bool:
         return role_rank(self.role) >= role_rank(role)
+
+
+class HashingBusy(RuntimeError):
+    """Every password-hashing slot is taken; the client should try again in a second."""
 
 
 class PasswordError(ValueError):
@@ -118,6 +128,7 @@ class Access:
     address_limiter: LoginLimiter = field(default_factory=lambda: LoginLimiter(max_failures=30))
     clock: Callable[[], int] = time.time_ns
     setup_token: str | None = None  # while there are no users: the one-time first-admin token
+    hashing_slots: threading.BoundedSemaphore = field(default_factory=lambda: threading.BoundedSemaphore(HASHING_SLOTS))
 
     @classmethod
     def disabled(cls, store: AccessStore | None = None) -> Access:
@@ -126,18 +137,31 @@ class Access:
 
     # --- passwords -----------------------------------------------------------------------------
     def hash_password(self, password: str) -> str:
-        return self.hasher.hash(check_password(password))
+        """``password``'s argon2 hash; ``PasswordError`` if the policy refuses it, ``HashingBusy``."""
+        check_password(password)
+        with self._hashing_slot():
+            return self.hasher.hash(password)
 
     def verify_password(self, name: str, password: str) -> User | None:
-        """The user if ``password`` is theirs. An unknown name costs as much time as a wrong password,
-        so timing does not tell which names exist."""
+        """The user if ``password`` is theirs; ``HashingBusy`` when all slots are taken. An unknown
+        name costs as much time as a wrong password, so timing does not tell which names exist."""
         user = self.store.user(name)
-        stored = user.password_hash if user is not None else self._dummy_hash()
-        try:
-            self.hasher.verify(stored, password)
-        except (VerificationError, InvalidHashError):
-            return None
+        with self._hashing_slot():
+            stored = user.password_hash if user is not None else self._dummy_hash()
+            try:
+                self.hasher.verify(stored, password)
+            except (VerificationError, InvalidHashError):
+                return None
         return user
+
+    @contextmanager
+    def _hashing_slot(self) -> Iterator[None]:
+        if not self.hashing_slots.acquire(blocking=False):
+            raise HashingBusy("the gateway is busy checking other passwords: try again in a second")
+        try:
+            yield
+        finally:
+            self.hashing_slots.release()
 
     def _dummy_hash(self) -> str:
         if not hasattr(self, "_dummy"):

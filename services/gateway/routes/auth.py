@@ -21,6 +21,7 @@ from bevflow_services.gateway.auth import (
     SESSION_COOKIE,
     Access,
     AccessDep,
+    HashingBusy,
     PasswordError,
     Viewer,
     check_password,
@@ -63,22 +64,27 @@ def _logged_in(response: Response, access: Access, user: User) -> Me:
 def login(credentials: Credentials, request: Request, response: Response, access: AccessDep) -> Me:
     if not access.enabled:
         raise HTTPException(400, "access control is off on this gateway (--auth off): there is nothing to log in to")
-    client = client_address(request)
-    wait_s = access.limiter.retry_after_s(credentials.name, client)
-    if wait_s:
-        raise HTTPException(429, f"too many failed logins for {credentials.name!r} from {client}: try again in {wait_s} s",
-                            headers={"Retry-After": str(wait_s)})
-    wait_s = access.address_limiter.retry_after_s("", client)
+    client, name = client_address(request), credentials.name
+    wait_s = access.address_limiter.attempt("", client)
     if wait_s:
         raise HTTPException(429, f"too many failed logins from {client}: try again in {wait_s} s",
                             headers={"Retry-After": str(wait_s)})
-    user = access.verify_password(credentials.name, credentials.password)
+    wait_s = access.limiter.attempt(name, client)
+    if wait_s:
+        access.address_limiter.withdraw("", client)
+        raise HTTPException(429, f"too many failed logins for {name!r} from {client}: try again in {wait_s} s",
+                            headers={"Retry-After": str(wait_s)})
+    try:
+        user = access.verify_password(name, credentials.password)
+    except HashingBusy:
+        access.limiter.withdraw(name, client)  # nothing was checked: not a guess
+        access.address_limiter.withdraw("", client)
+        raise
     if user is None:
-        access.limiter.failed(credentials.name, client)
-        access.address_limiter.failed("", client)
-        log.warning("failed login for %r from %s", credentials.name, client)
+        log.warning("failed login for %r from %s", name, client)
         raise HTTPException(401, "wrong user name or password")
-    access.limiter.succeeded(credentials.name, client)
+    access.limiter.succeeded(name, client)
+    access.address_limiter.withdraw("", client)
     log.info("%s logged in from %s", user.name, client)
     return _logged_in(response, access, user)
 
@@ -115,14 +121,14 @@ def me(principal: Viewer, access: AccessDep) -> Me:
              responses={403: {"description": "wrong or used-up setup token"}, 409: {"description": "users exist already"}})
 def setup(body: Setup, request: Request, response: Response, access: AccessDep) -> Me:
     client = client_address(request)
-    wait_s = access.limiter.retry_after_s("(setup)", client)
+    wait_s = access.limiter.attempt("(setup)", client)
     if wait_s:
         raise HTTPException(429, f"too many wrong setup tokens from {client}: try again in {wait_s} s",
                             headers={"Retry-After": str(wait_s)})
     if not access.setup_token_matches(body.token):
-        access.limiter.failed("(setup)", client)
         raise HTTPException(403, "wrong or used-up setup token: use the one in the gateway's log, or "
                             "`bevflow users add NAME --role admin --db URL`")
+    access.limiter.succeeded("(setup)", client)
     try:
         check_user_name(body.name)
         password_hash = access.hash_password(check_password(body.password))
