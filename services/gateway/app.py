@@ -18,8 +18,7 @@ from typing import Any
 from fastapi import Depends, FastAPI, Request
 from fastapi.encoders import jsonable_encoder
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, RedirectResponse, Response
-from fastapi.staticfiles import StaticFiles
+from fastapi.responses import JSONResponse
 from pydantic import TypeAdapter
 
 import bevflow_dashboard
@@ -27,8 +26,9 @@ from bevflow.schemas import AlertMessage, Tracks
 from bevflow.site import Site
 
 from bevflow_services.gateway.api_docs import add_api_docs
-from bevflow_services.gateway.auth import Access, HashingBusy, get_access, require_role
+from bevflow_services.gateway.auth import Access, HashingBusy, require_role
 from bevflow_services.gateway.body_limit import BodyLimit
+from bevflow_services.gateway.dashboard_files import serve_dashboard
 from bevflow_services.gateway.auth_headers import add_security_middleware
 from bevflow_services.gateway.routes import acknowledge, alerts, cameras, health, intervals, occupancy, streams, tracks
 from bevflow_services.gateway.routes import auth as auth_routes
@@ -45,19 +45,6 @@ log = logging.getLogger(__name__)
 
 DASHBOARD_DIR = Path(bevflow_dashboard.__file__).resolve().parent
 API_VERSION = "1"
-
-PLACEHOLDER = """<!doctype html>
-<html lang="en"><head><meta charset="utf-8"><title>bevflow</title></head>
-<body style="font-family: sans-serif; margin: 2em">
-<h1>bevflow gateway</h1>
-<p>The dashboard is not installed here. The API is running:</p>
-<ul>
-<li><a href="/api/occupancy">/api/occupancy</a>, <a href="/api/health">/api/health</a>,
-<a href="/api/cameras">/api/cameras</a>, <a href="/api/site">/api/site</a></li>
-<li><a href="/docs">/docs</a>: every route, with its parameters</li>
-</ul>
-</body></html>
-"""
 
 WEBSOCKETS_DOC = {
     "/ws/alerts": {
@@ -158,7 +145,7 @@ def create_app(
     app.add_middleware(BodyLimit)
     add_security_middleware(app, access.cors_origins, hsts=access.secure_cookies)
     add_api_docs(app, app.title)
-    _serve_dashboard(app, dashboard)
+    serve_dashboard(app, dashboard)  # last: it answers every GET no other route claimed
     app.openapi = lambda: _openapi(app)  # type: ignore[method-assign]
     return app
 
@@ -177,54 +164,6 @@ async def _validation_error(request: Request, exc: Exception) -> JSONResponse:
 async def _hashing_busy(request: Request, exc: Exception) -> JSONResponse:
     """503 at once when every password-hashing slot is taken (a login flood), instead of queueing."""
     return JSONResponse(status_code=503, content={"detail": str(exc)}, headers={"Retry-After": "1"})
-
-
-# The dashboard's pages and the role each needs; their scripts and styles are public (they hold
-# no data), and so is the login page.
-PAGES = {"index.html": "viewer", "calibration.html": "admin"}
-
-
-def _page_response(request: Request, folder: Path, name: str) -> Response:
-    """A dashboard page for a user with its role; the login page for anyone else."""
-    principal = get_access(request).principal(request)
-    role = PAGES[name]
-    if principal is None:
-        target = "/" if name == "index.html" else f"/{name}"
-        return RedirectResponse(f"/login.html?next={target}", status_code=303)
-    if not principal.can(role):
-        return HTMLResponse(FORBIDDEN.format(role=role, name=principal.name, user_role=principal.role), status_code=403)
-    page = folder / name
-    if page.is_file():
-        return FileResponse(page, headers={"Cache-Control": "no-store"})
-    return HTMLResponse(PLACEHOLDER) if name == "index.html" else HTMLResponse("not found", status_code=404)
-
-
-FORBIDDEN = """<!doctype html>
-<html lang="en"><head><meta charset="utf-8"><title>bevflow: not allowed</title>
-<link rel="stylesheet" href="/style.css"><link rel="stylesheet" href="/css/login.css"></head>
-<body><main class="login-page"><h1>Not allowed</h1>
-<p>This page needs the {role} role; {name} is a {user_role}.</p>
-<p><a href="/">Dashboard</a> · <a href="/logout">Log in as someone else</a></p></main></body></html>
-"""
-
-
-def _serve_dashboard(app: FastAPI, folder: Path) -> None:
-    @app.get("/", include_in_schema=False)
-    def index(request: Request) -> Response:
-        return _page_response(request, folder, "index.html")
-
-    for name in PAGES:
-        app.add_api_route(f"/{name}", _page_route(folder, name), methods=["GET"], include_in_schema=False)
-
-    # Last, so it only answers paths no route claimed (the dashboard's scripts and styles).
-    app.mount("/", StaticFiles(directory=folder, check_dir=False), name="dashboard")
-
-
-def _page_route(folder: Path, name: str) -> Callable[[Request], Response]:
-    def page(request: Request) -> Response:
-        return _page_response(request, folder, name)
-
-    return page
 
 
 def _openapi(app: FastAPI) -> dict[str, Any]:
