@@ -260,6 +260,6 @@ Admin = Annotated[Principal, Depends(require_role("admin"))]
 
 
 def client_address(conn: HTTPConnection) -> str:
-    """Where a request came from, for the audit log and rate limiting (the proxy's address unless
-    uvicorn is told to trust its forwarded headers)."""
+    """Where a request came from, for the audit log and rate limiting: the address it came from, or
+    the one a proxy named with ``--trusted-proxy`` forwarded (``gateway.main.proxy_options``)."""
     return conn.client.host if conn.client else "unknown"

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import ipaddress
 import logging
 import queue
 import re
@@ -123,6 +124,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     secure.add_argument("--cors-origin", action="append", default=[], metavar="ORIGIN",
                         help="a web origin (https://host:port) whose pages may call the API; repeat for more (default none)")
     secure.add_argument("--session-hours", type=float, default=12.0, help="how long a dashboard login lasts (default 12)")
+    secure.add_argument("--trusted-proxy", action="append", default=[], metavar="ADDRESS",
+                        help="a reverse proxy's address or network (10.0.0.2, 10.0.0.0/24) whose X-Forwarded-For and "
+                        "X-Forwarded-Proto are believed; repeat for more (default none: each request's address is "
+                        "the one it came from, for the audit log and the login limits)")
 
 
 def access_from_args(args: argparse.Namespace) -> Access:
@@ -156,6 +161,18 @@ def access_from_args(args: argparse.Namespace) -> Access:
                   cors_origins=tuple(args.cors_origin))
 
 
+def proxy_options(trusted: list[str]) -> dict[str, Any]:
+    """uvicorn's proxy settings: forwarded headers believed only from ``trusted``. uvicorn's own
+    default believes them from loopback, which would let any program on this host choose the
+    address that the audit log records and the login limits count; ``UserError`` for a bad address."""
+    for address in trusted:
+        try:
+            ipaddress.ip_network(address, strict=False)
+        except ValueError:
+            raise UserError(f"--trusted-proxy {address!r}: give an IP address or network, like 10.0.0.2 or 10.0.0.0/24") from None
+    return {"proxy_headers": bool(trusted), "forwarded_allow_ips": ",".join(trusted)}
+
+
 def announce_setup(access: Access, args: argparse.Namespace) -> None:
     """First run: with no users yet, log the one-time link that creates the first admin."""
     if not access.enabled:
@@ -174,6 +191,7 @@ def main(args: argparse.Namespace) -> int:
     """Serve until interrupted (``bevflow serve gateway``). Bus errors raise ``BusError``."""
     site, site_id = service_site(args)
     access = access_from_args(args)
+    proxies = proxy_options(args.trusted_proxy)
     view3d_port = None if args.no_view3d else (args.view3d_port or args.port + 1)
     session = open_session(config_from_args(args))
     stats = BusStats()
@@ -190,7 +208,7 @@ def main(args: argparse.Namespace) -> int:
     announce_setup(access, args)
     try:
         config = uvicorn.Config(app, host=args.host, port=args.port, log_level="info",
-                                ssl_certfile=args.tls_cert, ssl_keyfile=args.tls_key)
+                                ssl_certfile=args.tls_cert, ssl_keyfile=args.tls_key, **proxies)
         redact.install()  # after uvicorn set up its loggers: its access log would show ?token=
         uvicorn.Server(config).run()
     finally:
