@@ -18,7 +18,9 @@ Zenoh calls subscribers back on its own threads and has no asyncio API. Four way
   while it was not running (alerts for the recorder); messages may arrive twice.
 
 A bad payload never raises inside a Zenoh callback: it is counted in ``BusStats`` by reason and
-logged (at most once per reason per ``log_every_s``), and the stream goes on.
+logged (at most once per reason per ``log_every_s``), and the stream goes on. So is a message with
+a capture time beyond the receiver's clock plus a few seconds (``bevflow.capture_time``, reason
+``future_time``): one forged far-future tick must not pin the subscribers' "keep the newest" rules.
 
 >>> keys = Keys("hall")
 >>> keys.cylinders("cam1")
@@ -51,6 +53,7 @@ import zenoh
 import zenoh.ext
 from pydantic import TypeAdapter, ValidationError
 
+from bevflow.capture_time import CaptureWindow
 from bevflow.schemas import SCHEMA_VERSION, FrameHeader
 from bevflow.site import BusSecurity, SiteError, load_site_or_builtin
 
@@ -610,10 +613,12 @@ class Subscription(Generic[M]):
     Zenoh thread. Bad payloads and handler exceptions are counted in ``stats``, never raised."""
 
     def __init__(self, session: zenoh.Session, key: str, codec: Codec[M],
-                 on_message: Callable[[M], object] | None = None, *, stats: BusStats | None = None) -> None:
+                 on_message: Callable[[M], object] | None = None, *, stats: BusStats | None = None,
+                 window: CaptureWindow | None = None) -> None:
         self.key = key
         self.codec = codec
         self.stats = stats if stats is not None else BusStats()
+        self.window = window if window is not None else CaptureWindow.from_environment()
         self._on_message = on_message
         self._subscriber = session.declare_subscriber(key, self._on_sample)
 
@@ -641,6 +646,12 @@ class Subscription(Generic[M]):
         except Exception as exc:  # a codec bug: count it, keep the stream
             self.stats.reject(key, "decoder_error", repr(exc))
             return None
+        too_new = self.window.first_too_new(message, time.time_ns())
+        if too_new is not None:
+            name, value = too_new
+            self.stats.reject(key, "future_time", f"{_source(message)}{name}={value} is more than "
+                              f"{self.window.future_s:g} s ahead of this host's clock")
+            return None
         self.stats.count("decoded")
         return message
 
@@ -658,10 +669,20 @@ class Subscription(Generic[M]):
         self.close()
 
 
+def _source(message: Any) -> str:
+    """Who a message says it comes from, for a log line: its camera, site or alert id."""
+    model = getattr(message, "header", message)
+    for field_name in ("camera", "site", "id"):
+        value = getattr(model, field_name, None)
+        if isinstance(value, str):
+            return f"{field_name} {value[:40]!r}: "
+    return ""
+
+
 def subscribe(session: zenoh.Session, key: str, codec: Codec[M], on_message: Callable[[M], object],
-              *, stats: BusStats | None = None) -> Subscription[M]:
+              *, stats: BusStats | None = None, window: CaptureWindow | None = None) -> Subscription[M]:
     """Call ``on_message`` (on a Zenoh thread) with each decoded message published on ``key``."""
-    return Subscription(session, key, codec, on_message, stats=stats)
+    return Subscription(session, key, codec, on_message, stats=stats, window=window)
 
 
 class AsyncSubscription(Subscription[M]):
@@ -672,12 +693,13 @@ class AsyncSubscription(Subscription[M]):
     Create it on the event loop's thread, or pass ``loop``."""
 
     def __init__(self, session: zenoh.Session, key: str, codec: Codec[M], *, maxsize: int = 64,
-                 loop: asyncio.AbstractEventLoop | None = None, stats: BusStats | None = None) -> None:
+                 loop: asyncio.AbstractEventLoop | None = None, stats: BusStats | None = None,
+                 window: CaptureWindow | None = None) -> None:
         if maxsize < 1:
             raise ValueError("maxsize must be at least 1")
         self._loop = loop or asyncio.get_running_loop()
         self.queue: asyncio.Queue[M] = asyncio.Queue(maxsize)
-        super().__init__(session, key, codec, stats=stats)
+        super().__init__(session, key, codec, stats=stats, window=window)
 
     def _deliver(self, message: M) -> None:  # on a Zenoh thread
         try:
@@ -707,10 +729,10 @@ class LatestSubscription(Subscription[M]):
     frames that are overwritten cost nothing but their transfer."""
 
     def __init__(self, session: zenoh.Session, key: str, codec: Codec[M], *, keep: int = 1,
-                 stats: BusStats | None = None) -> None:
+                 stats: BusStats | None = None, window: CaptureWindow | None = None) -> None:
         self._samples: collections.deque[zenoh.Sample] = collections.deque(maxlen=keep)
         self._ready = threading.Condition()
-        super().__init__(session, key, codec, stats=stats)
+        super().__init__(session, key, codec, stats=stats, window=window)
 
     def _accept(self, sample: zenoh.Sample) -> None:
         with self._ready:
@@ -750,10 +772,12 @@ class HistorySubscription(Subscription[M]):
     """
 
     def __init__(self, session: zenoh.Session, key: str, codec: Codec[M], on_message: Callable[[M], object],
-                 *, stats: BusStats | None = None, fetch_timeout_s: float = 10.0) -> None:
+                 *, stats: BusStats | None = None, fetch_timeout_s: float = 10.0,
+                 window: CaptureWindow | None = None) -> None:
         self.key = key
         self.codec = codec
         self.stats = stats if stats is not None else BusStats()
+        self.window = window if window is not None else CaptureWindow.from_environment()
         self._on_message = on_message
         self._session = session
         self._fetch_timeout_s = fetch_timeout_s

@@ -9,10 +9,14 @@ pages, track summaries and alert acknowledgements.
 
 from __future__ import annotations
 
+import time
+from collections.abc import Callable
+
 import numpy as np
 
 from bevflow.analytics.contacts import contacts
 from bevflow.analytics.trajectories import TrackHistory, Trajectory
+from bevflow.capture_time import CaptureWindow
 from bevflow.schemas import Contact, Event, Occupancy, Tracks
 
 from bevflow_services.cli import UserError
@@ -40,11 +44,23 @@ class DatabaseHistory:
     ``occupancy()`` without ``since_ns`` returns the last ``open_range_s`` seconds (before
     ``until_ns`` or the newest sample) rather than the whole database: routes that read "all the
     history" were written for an hour in memory, not for a year on disk.
+
+    Nothing is read beyond ``clock()`` plus the capture window's future bound
+    (``bevflow.capture_time``): a row a forged message wrote there would otherwise head every
+    newest-first list until the recorder's retention pass removes it.
     """
 
-    def __init__(self, db: HistoryDatabase, open_range_s: float = 86_400.0) -> None:
+    def __init__(self, db: HistoryDatabase, open_range_s: float = 86_400.0, *,
+                 clock: Callable[[], int] = time.time_ns, window: CaptureWindow | None = None) -> None:
         self.db = db
         self.open_range_ns = int(open_range_s * NS)
+        self.clock = clock
+        self.window = window if window is not None else CaptureWindow.from_environment()
+
+    def _until(self, until_ns: int | None) -> int:
+        """``until_ns``, but no later than the newest capture time trusted now."""
+        latest = self.window.latest_ns(self.clock())
+        return latest if until_ns is None else min(until_ns, latest)
 
     @property
     def retention_ns(self) -> int:
@@ -65,17 +81,17 @@ class DatabaseHistory:
     # --- HistoryStore ----------------------------------------------------------------------------
     def occupancy(self, since_ns: int | None = None, until_ns: int | None = None) -> list[OccupancySample]:
         if since_ns is None:
-            end = until_ns if until_ns is not None else self.db.newest_occupancy_ns()
+            end = until_ns if until_ns is not None else self.db.newest_occupancy_ns(self._until(None))
             since_ns = None if end is None else end - self.open_range_ns
-        return [_sample(p) for p in self.db.occupancy(since_ns, until_ns)]
+        return [_sample(p) for p in self.db.occupancy(since_ns, self._until(until_ns))]
 
     def events(self, query: EventQuery, limit: int, offset: int = 0) -> tuple[list[Event], int]:
         wanted = EventFilter(types=query.types, zone=query.zone, track=query.track, active=query.active,
-                             since_ns=query.since_ns, until_ns=query.until_ns)
+                             since_ns=query.since_ns, until_ns=self._until(query.until_ns))
         return self.db.events(wanted, limit, offset)
 
     def trajectory(self, track_id: int, since_ns: int | None = None, until_ns: int | None = None) -> Trajectory | None:
-        path = self.db.trajectory(track_id, since_ns, until_ns)
+        path = self.db.trajectory(track_id, since_ns, self._until(until_ns))
         return None if path is None else Trajectory(track_id, path[0], path[1])
 
     def contacts(
@@ -105,12 +121,12 @@ class DatabaseHistory:
     def occupancy_steps(self, since_ns: int | None, until_ns: int | None, step_s: int, limit: int,
                         offset: int = 0) -> tuple[list[OccupancySample], int]:
         """Highest counts per ``step_s`` seconds, oldest first: one page and the number of steps."""
-        points, total = self.db.occupancy_steps(since_ns, until_ns, step_s, limit, offset)
+        points, total = self.db.occupancy_steps(since_ns, self._until(until_ns), step_s, limit, offset)
         return [_sample(p) for p in points], total
 
     def track_summaries(self, since_ns: int | None = None, until_ns: int | None = None, zone: str | None = None,
                         limit: int = 100, offset: int = 0) -> tuple[list[TrackSummary], int]:
-        return self.db.track_summaries(since_ns, until_ns, zone, limit, offset)
+        return self.db.track_summaries(since_ns, self._until(until_ns), zone, limit, offset)
 
     def acknowledge(self, event_id: str, user: str, time_ns: int, note: str = "") -> Acknowledgement:
         """Record who acknowledged an alert and when; KeyError for an alert not in the history."""

@@ -15,6 +15,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from bevflow.capture_time import CaptureWindow
 from bevflow.schemas import (
     AlertMessage,
     CameraCylinders,
@@ -71,6 +72,7 @@ class GatewayState:
         camera_timeout_s: silence after which a camera counts as down.
         alert_queue: per-websocket-client queue length for alerts (oldest dropped when full).
         tracks_queue: the same for the live tracks stream; small, since only the newest matters.
+        window: how far from ``clock`` live capture times may be (``bevflow.capture_time``).
     """
 
     def __init__(
@@ -83,12 +85,14 @@ class GatewayState:
         camera_timeout_s: float = 5.0,
         alert_queue: int = 256,
         tracks_queue: int = 4,
+        window: CaptureWindow | None = None,
     ) -> None:
         self.site = site
         self.site_id = site_id or site.site
         self._site_names = {site.site, self.site_id}
         self.history: HistoryStore = history if history is not None else InMemoryHistory()
         self.clock = clock
+        self.window = window if window is not None else CaptureWindow.from_environment()
         self.alerts: Broadcaster[AlertMessage] = Broadcaster(alert_queue)
         self.tracks_stream: Broadcaster[Tracks] = Broadcaster(tracks_queue)
         self.started_ns = clock()
@@ -121,6 +125,9 @@ class GatewayState:
     def _apply_tracks(self, tracks: Tracks) -> bool:
         if tracks.site not in self._site_names:
             return self._ignore(f"tracks for site {tracks.site!r}")
+        # The bus refuses times beyond the future bound; the past bound keeps stale data out.
+        if self.window.too_old(tracks.time_ns, self.clock()):
+            return self._ignore(f"tracks at {tracks.time_ns} ns, older than the live window of this host's clock")
         latest = self._tracks
         if latest is not None and tracks.time_ns < latest.time_ns:
             return self._ignore(f"tracks at {tracks.time_ns} ns, older than the latest ({latest.time_ns} ns)")
@@ -141,6 +148,8 @@ class GatewayState:
     def _apply_occupancy(self, occupancy: Occupancy) -> bool:
         if occupancy.site not in self._site_names:
             return self._ignore(f"occupancy for site {occupancy.site!r}")
+        if self.window.too_old(occupancy.time_ns, self.clock()):
+            return self._ignore(f"occupancy at {occupancy.time_ns} ns, older than the live window of this host's clock")
         with self._lock:
             if self._occupancy is None or occupancy.time_ns >= self._occupancy.time_ns:
                 self._occupancy = occupancy

@@ -120,7 +120,8 @@ def run(recorder: Recorder, policy: RetentionPolicy, stop: threading.Event, comm
         try:
             recorder.flush()
             if time.monotonic() >= next_retention:
-                result = recorder.db.apply_retention(policy, time.time_ns())
+                now = recorder.clock()
+                result = recorder.db.apply_retention(policy, now, latest_ns=recorder.window.latest_ns(now))
                 # A backlog (first run, a retention shortened) is worked off a slice per flush.
                 next_retention = time.monotonic() + (retention_every if result.done else 0.0)
             if down_since is not None:

@@ -22,6 +22,7 @@ import time
 from collections import Counter
 from collections.abc import Callable
 
+from bevflow.capture_time import CaptureWindow
 from bevflow.schemas import Event, Occupancy, Tracks
 
 from bevflow_services.storage import Batch, HistoryDatabase, StorageUnavailable, TrackSampler
@@ -37,29 +38,42 @@ class Recorder:
         max_pending_rows: while the database is down, keep at most this many occupancy rows and
             as many positions (alerts are always kept).
         clock: wall-clock nanoseconds, stored with each alert as when it was recorded.
+        window: how old (by ``clock``) occupancy and positions may be and still be stored
+            (``bevflow.capture_time``; the bus refuses times in the future); older ones are counted
+            in ``counts["outside_window"]``.
     """
 
     def __init__(self, db: HistoryDatabase, *, track_period_s: float = 1.0, max_pending_rows: int = 1_000_000,
-                 clock: Callable[[], int] = time.time_ns) -> None:
+                 clock: Callable[[], int] = time.time_ns, window: CaptureWindow | None = None) -> None:
         self.db = db
         self.max_pending_rows = max_pending_rows
         self.clock = clock
+        self.window = window if window is not None else CaptureWindow.from_environment()
         self.counts: Counter[str] = Counter()
         self._lock = threading.Lock()
         self._pending = Batch()
         # Resume sampling after the newest stored position, so a restart mid-second does not
-        # store a second sample in the same period.
-        self._sampler = TrackSampler(track_period_s, db.newest_track_time_ns())
+        # store a second sample in the same period; a stored position beyond the clock (written
+        # before the bus refused such times) is not one to resume after.
+        newest = db.newest_track_time_ns(until_ns=self.window.latest_ns(clock()))
+        self._sampler = TrackSampler(track_period_s, newest)
 
     # --- input, on Zenoh threads ----------------------------------------------------------------
+    def _live(self, time_ns: int) -> bool:
+        live = not self.window.too_old(time_ns, self.clock())
+        if not live:
+            self.counts["outside_window"] += 1
+        return live
+
     def on_occupancy(self, occupancy: Occupancy) -> None:
         with self._lock:
-            self._pending.add_occupancy(occupancy)
-            self.counts["occupancy"] += 1
+            if self._live(occupancy.time_ns):
+                self._pending.add_occupancy(occupancy)
+                self.counts["occupancy"] += 1
 
     def on_tracks(self, tracks: Tracks) -> None:
         with self._lock:
-            if self._sampler.keep(tracks.time_ns):
+            if self._live(tracks.time_ns) and self._sampler.keep(tracks.time_ns):
                 self._pending.add_track_sample(tracks)
                 self.counts["track_samples"] += 1
 

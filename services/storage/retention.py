@@ -50,12 +50,46 @@ def _finished(tx: Transaction, table: str, column: str, cutoff: int) -> bool:
     return oldest is None or oldest >= cutoff
 
 
-def apply_retention(backend: Backend, policy: RetentionPolicy, now_ns: int, max_span_s: float = 3600.0) -> RetentionResult:
-    """Apply ``policy`` as of ``now_ns`` (capture-time nanoseconds), up to ``max_span_s`` per table."""
+# Rows with a capture time beyond the trusted bound (``bevflow.capture_time``): a forged message
+# or a wrong clock wrote them before the bus refused such times, and left alone they would sort
+# first for centuries and never age out.
+FUTURE_ROWS = (
+    ("DELETE FROM event_tracks WHERE event_id IN (SELECT id FROM events WHERE start_ns > ? OR end_ns > ?)", 2),
+    ("DELETE FROM acknowledgements WHERE event_id IN (SELECT id FROM events WHERE start_ns > ? OR end_ns > ?)", 2),
+    ("DELETE FROM events WHERE start_ns > ? OR end_ns > ?", 2),
+    ("DELETE FROM track_zones WHERE track_id IN (SELECT track_id FROM tracks WHERE first_ns > ?)", 1),
+    ("DELETE FROM tracks WHERE first_ns > ?", 1),
+    ("DELETE FROM track_zones WHERE first_ns > ?", 1),
+    ("UPDATE track_zones SET last_ns = first_ns WHERE last_ns > ?", 1),
+    ("DELETE FROM track_points WHERE time_ns > ?", 1),
+    ("UPDATE tracks SET last_ns = COALESCE((SELECT MAX(time_ns) FROM track_points p WHERE p.track_id = tracks.track_id), "
+     "first_ns) WHERE last_ns > ?", 1),
+    ("DELETE FROM occupancy WHERE time_ns > ?", 1),
+    ("DELETE FROM occupancy_coarse WHERE time_ns > ?", 1),
+)
+
+
+def purge_future(backend: Backend, latest_ns: int) -> int:
+    """Delete (or, for a last sighting, pull back) what lies beyond ``latest_ns``; returns the
+    rows deleted."""
+    deleted = 0
+    with backend.transaction() as tx:
+        for statement, uses in FUTURE_ROWS:
+            rows = tx.rowcount(statement, [latest_ns] * uses)
+            deleted += rows if statement.startswith("DELETE") else 0
+    return deleted
+
+
+def apply_retention(backend: Backend, policy: RetentionPolicy, now_ns: int, max_span_s: float = 3600.0,
+                    latest_ns: int | None = None) -> RetentionResult:
+    """Apply ``policy`` as of ``now_ns`` (capture-time nanoseconds), up to ``max_span_s`` per table;
+    with ``latest_ns``, first delete what lies beyond it (``purge_future``)."""
     span = max(int(max_span_s * NS), 1)
     step = policy.coarse_step_s * NS
     deleted: dict[str, int] = {}
     done = True
+    if latest_ns is not None:
+        deleted["future"] = purge_future(backend, latest_ns)
 
     # The fine cut-off is on a coarse step's edge, so a coarse bucket gets all its seconds at once.
     fine_cutoff = (now_ns - int(policy.fine_s * NS)) // step * step

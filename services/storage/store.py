@@ -125,9 +125,11 @@ class HistoryDatabase(Database):
             params + params)
         return _pivot(rows)
 
-    def newest_occupancy_ns(self) -> int | None:
-        """Time of the newest stored occupancy sample; None for an empty history."""
-        rows = self.backend.query("SELECT MAX(time_ns) FROM occupancy UNION ALL SELECT MAX(time_ns) FROM occupancy_coarse")
+    def newest_occupancy_ns(self, until_ns: int | None = None) -> int | None:
+        """Time of the newest stored occupancy sample no later than ``until_ns``; None for an empty history."""
+        where, params = between("time_ns", None, until_ns)
+        rows = self.backend.query(f"SELECT MAX(time_ns) FROM occupancy{_where(where)} UNION ALL "
+                                  f"SELECT MAX(time_ns) FROM occupancy_coarse{_where(where)}", params + params)
         times = [int(t) for (t,) in rows if t is not None]
         return max(times) if times else None
 
@@ -238,9 +240,11 @@ class HistoryDatabase(Database):
             [int64(track_id), int64(track_id), float(limit_m) ** 2, *params])
         return [(int(i), int(t), float(x), float(y)) for i, t, x, y in rows]
 
-    def newest_track_time_ns(self) -> int | None:
-        """Capture time of the newest stored position (where a restarted recorder resumes sampling)."""
-        (newest,), = self.backend.query("SELECT MAX(time_ns) FROM track_points")
+    def newest_track_time_ns(self, until_ns: int | None = None) -> int | None:
+        """Capture time of the newest stored position no later than ``until_ns`` (where a restarted
+        recorder resumes sampling: a row beyond its clock must not stop it for good)."""
+        where, params = between("time_ns", None, until_ns)
+        (newest,), = self.backend.query(f"SELECT MAX(time_ns) FROM track_points{_where(where)}", params)
         return None if newest is None else int(newest)
 
     # --- acknowledgements ----------------------------------------------------------------------
@@ -278,9 +282,11 @@ class HistoryDatabase(Database):
         rows = self.backend.query("SELECT value FROM settings WHERE name = 'retention'")
         return RetentionPolicy(**json.loads(rows[0][0])) if rows else None
 
-    def apply_retention(self, policy: RetentionPolicy, now_ns: int, max_span_s: float = 3600.0) -> RetentionResult:
-        """Downsample and delete what ``policy`` no longer keeps (see ``storage.retention``)."""
-        return apply_retention(self.backend, policy, now_ns, max_span_s)
+    def apply_retention(self, policy: RetentionPolicy, now_ns: int, max_span_s: float = 3600.0,
+                        latest_ns: int | None = None) -> RetentionResult:
+        """Downsample and delete what ``policy`` no longer keeps, and what lies beyond ``latest_ns``
+        (see ``storage.retention``)."""
+        return apply_retention(self.backend, policy, now_ns, max_span_s, latest_ns)
 
     def row_counts(self) -> dict[str, int]:
         """Rows per table, for health reports and tests."""

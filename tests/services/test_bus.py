@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 from bevflow import schemas
+from bevflow.capture_time import CaptureWindow
 from bevflow_services import bus
 from bevflow_services.launcher import free_port
 
@@ -278,6 +279,13 @@ GOOD_EVENT = EVENTS[0]
         (bus.FRAMES, GOOD_FRAME, bytes(4 * 2 * 3), b"\x00\x01garbage", "malformed"),
         (bus.FRAMES, GOOD_FRAME, bytes(4 * 2 * 3),
          GOOD_HEADER.model_dump_json().replace('"seq":0', '"seq":-1').encode(), "invalid"),
+        # Capture times beyond this host's clock plus the window (bevflow.capture_time).
+        (TRACKS, GOOD_TRACKS, _tracks_json(time_ns=2**63 - 1), None, "future_time"),
+        (TRACKS, GOOD_TRACKS, _tracks_json(time_ns=time.time_ns() + 3600 * 10**9), None, "future_time"),
+        (EVENT, GOOD_EVENT, GOOD_EVENT.model_copy(update={"raised_ns": 2**62}).model_dump_json().encode(),
+         None, "future_time"),
+        (bus.FRAMES, GOOD_FRAME, bytes(4 * 2 * 3),
+         GOOD_HEADER.model_copy(update={"capture_ns": 2**63 - 1}).model_dump_json().encode(), "future_time"),
     ],
 )
 def test_bad_payload_is_counted_and_the_stream_goes_on(keys, sessions, codec, good, payload, attachment, reason):
@@ -292,6 +300,36 @@ def test_bad_payload_is_counted_and_the_stream_goes_on(keys, sessions, codec, go
     assert received.empty()
     assert sub.stats.snapshot() == {"received": 2, "decoded": 1, "rejected": {reason: 1}, "dropped": 0,
                                     "handler_errors": 0}
+
+
+def test_a_future_time_is_logged_naming_where_it_came_from(keys, sessions, caplog):
+    a, b = sessions
+    received: queue.Queue = queue.Queue()
+    sub = bus.subscribe(b, keys.tracks, TRACKS, received.put)
+    publication(a, keys.tracks, TRACKS)
+    with caplog.at_level(logging.WARNING, logger="bevflow_services.bus"):
+        a.put(keys.tracks, _tracks_json(site="forged", time_ns=2**63 - 1))
+        assert wait_for(lambda: sub.stats.snapshot()["rejected"])
+    assert [m for m in caplog.messages if keys.tracks in m and "future_time" in m and "site 'forged'" in m
+            and "ahead of this host's clock" in m]
+
+
+@pytest.mark.parametrize(
+    ("environ", "future_s", "past_s"),
+    [
+        ({}, 5.0, 3600.0),
+        ({"BEVFLOW_CLOCK_FUTURE_S": "2.5", "BEVFLOW_CLOCK_PAST_S": "60"}, 2.5, 60.0),
+        ({"BEVFLOW_CLOCK_FUTURE_S": " "}, 5.0, 3600.0),
+    ],
+)
+def test_the_capture_window_is_one_setting(environ, future_s, past_s):
+    assert CaptureWindow.from_environment(environ) == CaptureWindow(future_s, past_s)
+
+
+@pytest.mark.parametrize("value", ["-1", "soon", "inf", "nan"])
+def test_a_bad_capture_window_names_its_variable(value):
+    with pytest.raises(ValueError, match="BEVFLOW_CLOCK_FUTURE_S"):
+        CaptureWindow.from_environment({"BEVFLOW_CLOCK_FUTURE_S": value})
 
 
 def test_a_message_written_as_json_by_its_maker_arrives_like_any_other(keys, sessions):

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from bevflow.capture_time import CaptureWindow
 from bevflow.schemas import TrackState, Tracks
 
 from bevflow_services.cli import UserError
@@ -43,7 +44,7 @@ def random_walks(seed: int = 7, ticks: int = 120, people: int = 12) -> list[Trac
 
 def test_trajectories_and_contacts_match_the_in_memory_history(db: HistoryDatabase) -> None:
     memory = InMemoryHistory(track_period_s=1.0)
-    recorder = Recorder(db, track_period_s=1.0)
+    recorder = Recorder(db, track_period_s=1.0, clock=lambda: T0 + 30 * S)
     for tick in random_walks():
         memory.add_tracks(tick)
         recorder.on_tracks(tick)
@@ -70,7 +71,7 @@ def test_it_reads_occupancy_and_alerts_and_writes_nothing_itself(db: HistoryData
     stored.add_occupancy(occupancy(T0, 3))
     stored.add_event(violation("v1", T0))
     assert stored.occupancy() == [] and stored.events(EventQuery(), 10) == ([], 0)
-    recorder = Recorder(db)
+    recorder = Recorder(db, clock=lambda: T0)
     recorder.on_occupancy(occupancy(T0, 3, gate=2))
     recorder.on_event(violation("v1", T0, zone="gate"))
     recorder.flush()
@@ -102,7 +103,7 @@ def test_the_gateway_has_a_db_option() -> None:
 
 def test_occupancy_without_a_start_is_the_last_day_not_the_whole_database(db: HistoryDatabase) -> None:
     assert DatabaseHistory(db).occupancy() == []
-    recorder = Recorder(db)
+    recorder = Recorder(db, clock=lambda: T0 + 3 * 86400 * S, window=CaptureWindow(past_s=4 * 86400))
     for day in range(3):
         recorder.on_occupancy(occupancy(T0 + day * 86400 * S, day + 1))
     recorder.on_occupancy(occupancy(T0 + 2 * 86400 * S - 10 * S, 9))

@@ -17,7 +17,7 @@ from bevflow_services.cli import UserError
 from bevflow_services.cli.serve import run_service
 from bevflow_services.gateway.main import bus_feed
 from bevflow_services.launcher import free_port
-from tests.services.gateway.feed import S, SITE_YAML, T0, occupancy, tracks, violation
+from tests.services.gateway.feed import S, SITE_YAML, T0, FakeClock, occupancy, tracks, violation
 
 TIMEOUT_S = 10.0
 
@@ -56,7 +56,7 @@ def sessions() -> Iterator[tuple[object, object]]:
 def test_the_gateway_serves_what_the_bus_delivers(site: Site, sessions) -> None:
     publisher_side, gateway_side = sessions
     keys = bus.Keys("hall")
-    state = GatewayState(site)
+    state = GatewayState(site, clock=lambda: T0 + 2 * S)  # the feed's capture times are live
     stats = bus.BusStats()
     app = create_app(site, state, feed=bus_feed(gateway_side, state, stats))
     app.state.bus_stats = stats
@@ -112,8 +112,25 @@ def test_bad_arguments_are_one_line_for_the_user(tmp_path, argv: list[str], mess
         run_service("gateway", [a.replace("{site}", str(site_file)) for a in argv])
 
 
+def test_a_forged_far_future_tick_does_not_freeze_the_live_tracks(site: Site, sessions) -> None:
+    """One tick at 2**63 - 1 ns used to become the latest, and every true tick after it was
+    ignored as older, freezing /api/tracks and /ws/tracks until the gateway restarted."""
+    publisher_side, gateway_side = sessions
+    now = time.time_ns()
+    state = GatewayState(site, clock=time.time_ns)
+    stats = bus.BusStats()
+    with TestClient(create_app(site, state, feed=bus_feed(gateway_side, state, stats))) as client:
+        ticks = bus.Publication(publisher_side, bus.Keys("hall").tracks, bus.JsonCodec(Tracks))
+        assert ticks.wait_for_subscribers(TIMEOUT_S)
+        ticks.put(tracks(2**63 - 1, {666: (1.0, 1.0)}))
+        ticks.put(tracks(now, {7: (2.0, 2.0)}))
+        assert _wait_for(lambda: [t["id"] for t in client.get("/api/tracks").json()["items"]] == [7])
+        assert stats.snapshot()["rejected"] == {"future_time": 1}
+        ticks.close()
+
+
 def test_the_state_accepts_the_bus_site_id_as_well(site: Site) -> None:
-    state = GatewayState(site, site_id="hall-b")
+    state = GatewayState(site, site_id="hall-b", clock=FakeClock())
     assert state.apply(tracks(T0, {1: (0.0, 0.0)}).model_copy(update={"site": "hall-b"}))
     assert state.apply(tracks(T0 + S, {1: (0.0, 0.0)}))
     assert not state.apply(tracks(T0 + 2 * S, {}).model_copy(update={"site": "other"}))

@@ -151,8 +151,9 @@ def client(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TestClient]:
     alerts, written by the recorder as in production."""
     site: Site = parse_site(SITE_YAML)
     db = HistoryDatabase.open(str(tmp_path_factory.mktemp("history") / "history.db"))
-    recorder = Recorder(db)
-    state = GatewayState(site, DatabaseHistory(db), clock=FakeClock(T0 + 600 * S), camera_timeout_s=5.0)
+    clock = FakeClock(T0 + 600 * S)
+    recorder = Recorder(db, clock=clock)
+    state = GatewayState(site, DatabaseHistory(db, clock=clock), clock=clock, camera_timeout_s=5.0)
     messages: list[Any] = [occupancy(T0 + k * S, total=k % 7, gate=k % 4, shop=k % 11) for k in range(0, 600, 5)]
     messages += [tracks(T0 + k * S, {1: (1.0 + k / 600, 1.0), 2: (2.0, 1.5), 3: (8.0, 2.0)}, violations=[(1, 2)],
                         zones={1: ["gate"], 2: ["gate"], 3: ["shop"]}) for k in range(0, 600, 2)]

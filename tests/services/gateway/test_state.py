@@ -42,6 +42,14 @@ def test_tracks_older_than_the_latest_are_ignored(state: GatewayState) -> None:
     assert state.tracks is not None and state.tracks.time_ns == T0 + 2 * S
 
 
+def test_ticks_older_than_the_live_window_are_ignored(state: GatewayState, clock: FakeClock) -> None:
+    clock.advance(3600)
+    assert state.apply(tracks(T0 - S, {1: (9.0, 9.0)})) is False
+    assert state.apply(occupancy(T0 - S, 9)) is False
+    assert state.ignored == 2 and state.tracks is None and state.occupancy is None
+    assert state.apply(tracks(T0 + S, {1: (1.0, 1.0)})) and state.apply(occupancy(T0 + S, 1))
+
+
 def test_active_alerts_follow_start_and_end_messages_with_the_same_id(state: GatewayState) -> None:
     state.apply(violation("v1", T0))
     state.apply(over_capacity("c1", T0 + S))

@@ -100,7 +100,8 @@ def start_recorder(url: str, endpoint: str, site_id: str, log: Path) -> subproce
             "--mode", "peer", "--connect", endpoint, "--no-shared-memory", "--db", url]
     with log.open("ab") as out:
         return subprocess.Popen(argv, stdout=out, stderr=subprocess.STDOUT, start_new_session=True,
-                                env={**os.environ, "PYTHONUNBUFFERED": "1"})
+                                # The stream's capture times run 20 times faster than the clock.
+                                env={**os.environ, "PYTHONUNBUFFERED": "1", "BEVFLOW_CLOCK_FUTURE_S": "3600"})
 
 
 def recorder_alive(live: bus.LiveServices, process: subprocess.Popen[bytes], log: Path):

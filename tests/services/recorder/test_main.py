@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import threading
+import time
 from pathlib import Path
 
 import pytest
+
+from bevflow.capture_time import CaptureWindow
 
 from bevflow_services.cli import UserError
 from bevflow_services.cli.serve import run_service
@@ -38,6 +41,8 @@ class Loop:
         self.retention_done = retention_done
         self.flush_failures = flush_failures
         self.db = self
+        self.clock, self.window = time.time_ns, CaptureWindow()
+        self.latest_ns: list[int | None] = []
 
     def flush(self) -> int:
         self.flushes += 1
@@ -51,8 +56,9 @@ class Loop:
     def pending(self) -> int:
         return 0
 
-    def apply_retention(self, policy: RetentionPolicy, now_ns: int) -> RetentionResult:
+    def apply_retention(self, policy: RetentionPolicy, now_ns: int, latest_ns: int | None = None) -> RetentionResult:
         self.retentions += 1
+        self.latest_ns.append(latest_ns and latest_ns - now_ns)
         return RetentionResult(done=self.retention_done.pop(0) if self.retention_done else True)
 
 
@@ -69,3 +75,4 @@ def test_the_loop_flushes_and_works_off_retention_between_flushes(retention_done
     run(loop, RetentionPolicy(), loop.stop, commit_interval=0.05, retention_every=3600)  # type: ignore[arg-type]
     assert loop.flushes == 6
     assert loop.retentions == retentions
+    assert loop.latest_ns == [5 * 10**9] * retentions  # rows beyond the clock's future bound are purged

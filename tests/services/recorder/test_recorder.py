@@ -11,6 +11,11 @@ from bevflow_services.storage import Batch, EventFilter, HistoryDatabase, Storag
 from tests.services.gateway.feed import S, T0, occupancy, tracks, violation
 
 MS = 1_000_000
+NOW = T0 + 99 * S  # the recorder's clock: the feed's capture times are live
+
+
+def now() -> int:
+    return NOW
 
 
 @pytest.fixture
@@ -36,7 +41,7 @@ class FlakyDatabase:
 
 
 def test_a_flush_writes_what_arrived_since_the_last_one(db: HistoryDatabase) -> None:
-    recorder = Recorder(db, clock=lambda: T0 + 99 * S)
+    recorder = Recorder(db, clock=now)
     recorder.on_occupancy(occupancy(T0, 3, gate=1))
     recorder.on_occupancy(occupancy(T0 + 500 * MS, 5, gate=0))
     recorder.on_event(violation("v1", T0))
@@ -52,7 +57,7 @@ def test_a_flush_writes_what_arrived_since_the_last_one(db: HistoryDatabase) -> 
 
 
 def test_a_failed_flush_keeps_its_rows_for_the_next_one(db: HistoryDatabase) -> None:
-    recorder = Recorder(FlakyDatabase(db, failures=2))  # type: ignore[arg-type]
+    recorder = Recorder(FlakyDatabase(db, failures=2), clock=now)  # type: ignore[arg-type]
     recorder.on_occupancy(occupancy(T0, 3))
     recorder.on_event(violation("v1", T0))
     for _ in range(2):
@@ -67,7 +72,7 @@ def test_a_failed_flush_keeps_its_rows_for_the_next_one(db: HistoryDatabase) -> 
 
 
 def test_a_long_outage_drops_the_oldest_samples_but_never_an_alert(db: HistoryDatabase) -> None:
-    recorder = Recorder(FlakyDatabase(db, failures=10), max_pending_rows=6)  # type: ignore[arg-type]
+    recorder = Recorder(FlakyDatabase(db, failures=10), max_pending_rows=6, clock=now)  # type: ignore[arg-type]
     for k in range(10):
         recorder.on_occupancy(occupancy(T0 + k * S, k))
         recorder.on_event(violation(f"v{k}", T0 + k * S))
@@ -80,11 +85,41 @@ def test_a_long_outage_drops_the_oldest_samples_but_never_an_alert(db: HistoryDa
 
 
 def test_a_restarted_recorder_resumes_sampling_after_the_stored_positions(db: HistoryDatabase) -> None:
-    first = Recorder(db)
+    first = Recorder(db, clock=now)
     first.on_tracks(tracks(T0 + 100 * MS, {1: (0.0, 0.0)}))
     first.flush()
-    second = Recorder(db)  # killed and started again within the same second
+    second = Recorder(db, clock=now)  # killed and started again within the same second
     second.on_tracks(tracks(T0 + 600 * MS, {1: (1.0, 0.0)}))
     second.on_tracks(tracks(T0 + 1100 * MS, {1: (2.0, 0.0)}))
     second.flush()
     assert ((db.trajectory(1)[0] - T0) // MS).tolist() == [100, 1100]
+
+
+def test_a_stored_position_beyond_the_clock_does_not_stop_recording(db: HistoryDatabase) -> None:
+    """A forged tick at 2**63 - 1 ns, stored before the bus refused such times, used to make every
+    restarted recorder resume sampling after it: no position was ever stored again."""
+    forged = Batch()
+    forged.add_track_sample(tracks(2**63 - 1, {666: (0.0, 0.0)}))
+    db.write(forged)
+    recorder = Recorder(db, clock=now)
+    recorder.on_tracks(tracks(T0, {1: (1.0, 0.0)}))
+    recorder.flush()
+    assert (db.trajectory(1)[0] == [T0]).all()
+
+
+@pytest.mark.parametrize(
+    ("time_ns", "stored"),
+    [
+        (NOW + 4 * S, True),  # the bus refuses what lies further ahead (tests/services/test_bus.py)
+        (NOW - 3600 * S + S, True),
+        (NOW - 3600 * S - S, False),  # older than the live hour
+        (0, False),
+    ],
+)
+def test_capture_times_older_than_the_live_window_are_counted_not_stored(db: HistoryDatabase, time_ns: int,
+                                                                 stored: bool) -> None:
+    recorder = Recorder(db, clock=now)
+    recorder.on_tracks(tracks(time_ns, {1: (1.0, 0.0)}))
+    recorder.on_occupancy(occupancy(time_ns, 3))
+    assert recorder.pending() == (1 + 3 if stored else 0)
+    assert recorder.counts["outside_window"] == (0 if stored else 2)

@@ -115,3 +115,27 @@ def test_the_recorders_policy_is_kept_for_readers(db: HistoryDatabase) -> None:
     db.save_retention(policy)
     db.save_retention(policy)  # saved again at every start
     assert db.retention() == policy
+
+
+FAR_FUTURE = 2**63 - 1
+
+
+def test_rows_beyond_the_trusted_bound_are_purged_and_the_rest_kept(db: HistoryDatabase) -> None:
+    """Rows a forged far-future message wrote never age out by themselves; retention removes them
+    and pulls a real track's last sighting back to its newest true position."""
+    batch = Batch()
+    for t in (B, B + S):
+        batch.add_track_sample(tracks(t, {1: (0.0, 0.0)}))
+        batch.add_occupancy(occupancy(t, 1, gate=1))
+    batch.add_track_sample(tracks(FAR_FUTURE, {1: (5.0, 5.0), 666: (1.0, 1.0)}))
+    batch.add_occupancy(occupancy(FAR_FUTURE, 99, gate=99))
+    batch.add_event(violation("forged", FAR_FUTURE))
+    batch.add_event(violation("real", B))
+    db.write(batch)
+    result = db.apply_retention(RetentionPolicy(), now_ns=B + 10 * S, latest_ns=B + 15 * S)
+    assert result.deleted["future"] > 0
+    assert [s.track_id for s in db.track_summaries()[0]] == [1]
+    assert db.track_summaries()[0][0].last_ns == B + S
+    assert db.newest_track_time_ns() == B + S and db.newest_occupancy_ns() == B + S
+    assert [e.id for e in db.events(EventFilter(), 10)[0]] == ["real"]
+    assert db.apply_retention(RetentionPolicy(), now_ns=B + 10 * S, latest_ns=B + 15 * S).deleted["future"] == 0

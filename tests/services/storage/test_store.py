@@ -244,3 +244,10 @@ def test_an_incident_keeps_its_latest_people_until_it_ends(db: HistoryDatabase) 
     write(db, incident("i1", T0, people=(1, 2)))  # a replayed older message never reopens it
     (stored,) = db.events(EventFilter(), 10)[0]
     assert (stored.end_ns, stored.tracks) == (T0 + 40 * S, [1, 2, 3, 4])
+
+
+def test_the_newest_position_ignores_rows_beyond_a_bound(paths: HistoryDatabase) -> None:
+    newest = paths.newest_track_time_ns()
+    assert newest is not None
+    assert paths.newest_track_time_ns(until_ns=newest - 1) < newest
+    assert paths.newest_track_time_ns(until_ns=0) is None

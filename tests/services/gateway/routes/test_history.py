@@ -20,7 +20,7 @@ from bevflow_services.gateway import GatewayState, create_app
 from bevflow_services.gateway.history import HistoryStore, InMemoryHistory
 from bevflow_services.gateway.history_db import DatabaseHistory
 from bevflow_services.recorder.recorder import Recorder
-from bevflow_services.storage import HistoryDatabase
+from bevflow_services.storage import Batch, HistoryDatabase
 from tests.services.gateway.feed import S, T0, FakeClock, occupancy, over_capacity, tracks, violation
 from tests.services.storage.databases import new_database_url
 
@@ -58,7 +58,7 @@ def gateway_over(kind: str, site: Site, clock: FakeClock, folder: Path) -> Itera
     store: HistoryStore = InMemoryHistory(retention_s=7 * 86400)
     if kind != "memory":
         db = HistoryDatabase.open(new_database_url(kind, folder))
-        store, recorder = DatabaseHistory(db), Recorder(db)
+        store, recorder = DatabaseHistory(db), Recorder(db, clock=clock)
     state = GatewayState(site, store, clock=clock)
     try:
         with TestClient(create_app(site, state)) as client:
@@ -209,6 +209,19 @@ def test_track_summaries(database: History, query: str, ids: list[int]) -> None:
     feed_tracks(database)
     body = database.client.get(f"/api/history/tracks?{query}").json()
     assert [t["id"] for t in body["items"]] == ids
+
+
+def test_rows_a_forged_far_future_tick_stored_do_not_head_the_history(database: History) -> None:
+    """A year-2262 row, stored before the bus refused such times, used to stay at the top of
+    /api/history/tracks and the alert list."""
+    feed_tracks(database)
+    forged = Batch()
+    forged.add_track_sample(tracks(2**63 - 1, {666: (1.0, 1.0)}))
+    forged.add_event(violation("forged", 2**63 - 1))
+    assert isinstance(database.state.history, DatabaseHistory)
+    database.state.history.db.write(forged)
+    assert [t["id"] for t in database.client.get("/api/history/tracks").json()["items"]] == [3, 2, 1]
+    assert "forged" not in {a["id"] for a in database.client.get("/api/alerts").json()["items"]}
 
 
 def test_a_track_summary_says_when_and_where(database: History) -> None:
