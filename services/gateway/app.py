@@ -28,6 +28,7 @@ from bevflow.site import Site
 from bevflow_services.gateway.api_docs import add_api_docs
 from bevflow_services.gateway.auth import Access, HashingBusy, require_role
 from bevflow_services.gateway.body_limit import BodyLimit
+from bevflow_services.gateway.cross_site import CrossSiteGuard
 from bevflow_services.gateway.dashboard_files import serve_dashboard
 from bevflow_services.gateway.auth_headers import add_security_middleware
 from bevflow_services.gateway.routes import acknowledge, alerts, cameras, health, intervals, occupancy, streams, tracks
@@ -143,6 +144,7 @@ def create_app(
     app.add_exception_handler(RequestValidationError, _validation_error)
     app.add_exception_handler(HashingBusy, _hashing_busy)
     app.add_middleware(BodyLimit)
+    app.add_middleware(CrossSiteGuard, access=access)
     add_security_middleware(app, access.cors_origins, hsts=access.secure_cookies)
     add_api_docs(app, app.title)
     serve_dashboard(app, dashboard)  # last: it answers every GET no other route claimed

@@ -128,6 +128,8 @@ class Access:
     address_limiter: LoginLimiter = field(default_factory=lambda: LoginLimiter(max_failures=30))
     clock: Callable[[], int] = time.time_ns
     setup_token: str | None = None  # while there are no users: the one-time first-admin token
+    # Access control off: answer only requests whose Host names this machine (see cross_site).
+    loopback_only: bool = False
     hashing_slots: threading.BoundedSemaphore = field(default_factory=lambda: threading.BoundedSemaphore(HASHING_SLOTS))
 
     @classmethod

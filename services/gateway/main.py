@@ -27,7 +27,7 @@ from typing import Any
 
 import uvicorn
 
-from bevflow.schemas import CameraCylinders, Detections2D, Event, FrameHeader, Occupancy, Tracks
+from bevflow.schemas import CameraCylinders, Detections2D, Event, FrameHeader, Occupancy, OpenAlerts, Tracks
 
 from bevflow_services import redact
 from bevflow_services.bus import (
@@ -55,7 +55,8 @@ log = logging.getLogger(__name__)
 
 SERVICE = "gateway"
 # Queue lengths: alerts must not be dropped; for tracks only the newest matters.
-QUEUES = {"tracks": 16, "occupancy": 64, "events": 4096, "detections": 512}
+QUEUES = {"tracks": 16, "occupancy": 64, "events": 4096, "detections": 512, "open_alerts": 16}
+LAPSE_CHECK_S = 1.0  # how often open alerts nobody renews are ended (bevflow.alert_lease)
 
 
 async def _apply_all(sub: AsyncSubscription[Any], state: GatewayState) -> None:
@@ -64,6 +65,15 @@ async def _apply_all(sub: AsyncSubscription[Any], state: GatewayState) -> None:
             state.apply(message)
         except Exception:  # one bad message must not stop the feed
             log.exception("gateway could not apply a message from %s", sub.key)
+
+
+async def _end_lapsed_alerts(state: GatewayState) -> None:
+    while True:
+        await asyncio.sleep(LAPSE_CHECK_S)
+        try:
+            state.end_lapsed_alerts()
+        except Exception:  # the next check tries again
+            log.exception("gateway could not end the lapsed alerts")
 
 
 def bus_feed(session: Any, state: GatewayState, stats: BusStats) -> Any:
@@ -78,6 +88,7 @@ def bus_feed(session: Any, state: GatewayState, stats: BusStats) -> Any:
             AsyncSubscription(session, keys.occupancy, JsonCodec(Occupancy), maxsize=QUEUES["occupancy"], stats=stats),
             AsyncSubscription(session, keys.events, JsonCodec(Event, "Event"), maxsize=QUEUES["events"], stats=stats),
             AsyncSubscription(session, keys.detections("*"), JsonCodec(Detections2D), maxsize=QUEUES["detections"], stats=stats),
+            AsyncSubscription(session, keys.open_alerts, JsonCodec(OpenAlerts), maxsize=QUEUES["open_alerts"], stats=stats),
         ]
 
         def on_change(service: LiveService, alive: bool) -> None:  # on a Zenoh thread
@@ -86,6 +97,7 @@ def bus_feed(session: Any, state: GatewayState, stats: BusStats) -> Any:
         watcher = LiveServices(session, keys, on_change=on_change)
         token = announce(session, keys, SERVICE)
         tasks = [asyncio.create_task(_apply_all(sub, state)) for sub in subscriptions]
+        tasks.append(asyncio.create_task(_end_lapsed_alerts(state)))
         try:
             yield
         finally:
@@ -157,8 +169,8 @@ def access_from_args(args: argparse.Namespace) -> Access:
         store = AccessStore.open(url) if url else AccessStore.open(":memory:")
     except StorageError as exc:
         raise UserError(f"{'--auth-db' if args.auth_db else '--db'}: {exc}") from None
-    return Access(store, enabled=args.auth == "on", secure_cookies=bool(args.tls_cert), session_s=args.session_hours * 3600,
-                  cors_origins=tuple(args.cors_origin))
+    return Access(store, enabled=args.auth == "on", loopback_only=args.auth == "off", secure_cookies=bool(args.tls_cert),
+                  session_s=args.session_hours * 3600, cors_origins=tuple(args.cors_origin))
 
 
 def proxy_options(trusted: list[str]) -> dict[str, Any]:
