@@ -63,7 +63,8 @@ def read_password(from_stdin: bool) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from bevflow_services.gateway.auth import Access, PasswordError, new_api_token
+    from bevflow_services.gateway.auth import Access, new_api_token
+    from bevflow_services.gateway.password_policy import PasswordError
     from bevflow_services.storage import StorageError
     from bevflow_services.storage.access import AccessStore
 
@@ -75,10 +76,10 @@ def run(args: argparse.Namespace) -> int:
     now = time.time_ns()
     try:
         if args.action == "add":
-            user = store.add_user(args.name, args.role, access.hash_password(read_password(args.password_stdin)), now)
+            user = store.add_user(args.name, args.role, access.hash_password(read_password(args.password_stdin), args.name), now)
             print(f"added {user.name} ({user.role})")
         elif args.action == "password":
-            store.set_password(args.name, access.hash_password(read_password(args.password_stdin)))
+            store.set_password(args.name, access.hash_password(read_password(args.password_stdin), args.name))
             print(f"password of {args.name} changed; their dashboard sessions and API tokens ended")
         elif args.action == "list":
             tokens = store.tokens()

@@ -34,6 +34,7 @@ from fastapi import Depends, HTTPException
 from starlette.requests import HTTPConnection
 
 from bevflow_services.gateway.auth_limits import LoginLimiter
+from bevflow_services.gateway.password_policy import check_password
 from bevflow_services.storage.access import ROLES, AccessStore, User
 
 log = logging.getLogger(__name__)
@@ -41,8 +42,9 @@ log = logging.getLogger(__name__)
 SESSION_COOKIE = "bevflow_session"
 TOKEN_PREFIX = "bvf_"
 LOCAL_USER = "local"  # who every request is when access control is off
-MIN_PASSWORD = 10
 NS = 1_000_000_000
+# How long the first-run setup link works: it is written to the log, which others may read later.
+SETUP_LINK_S = 3600.0
 # Passwords hashed or checked at once. Each argon2 call takes 64 MiB and a core for a fraction of
 # a second; beyond this many a login is refused at once (503) rather than queued, so a flood of
 # logins cannot take every worker thread and gigabytes of memory from the people using the site.
@@ -67,16 +69,6 @@ class Principal:
 
 class HashingBusy(RuntimeError):
     """Every password-hashing slot is taken; the client should try again in a second."""
-
-
-class PasswordError(ValueError):
-    """A password that is not acceptable (too short); the message says why."""
-
-
-def check_password(password: str) -> str:
-    if len(password) < MIN_PASSWORD:
-        raise PasswordError(f"a password needs at least {MIN_PASSWORD} characters")
-    return password
 
 
 def new_api_token() -> str:
@@ -128,6 +120,7 @@ class Access:
     address_limiter: LoginLimiter = field(default_factory=lambda: LoginLimiter(max_failures=30))
     clock: Callable[[], int] = time.time_ns
     setup_token: str | None = None  # while there are no users: the one-time first-admin token
+    setup_expires_ns: int = 0
     # Access control off: answer only requests whose Host names this machine (see cross_site).
     loopback_only: bool = False
     hashing_slots: threading.BoundedSemaphore = field(default_factory=lambda: threading.BoundedSemaphore(HASHING_SLOTS))
@@ -138,9 +131,10 @@ class Access:
         return cls(store or AccessStore.open(":memory:"), enabled=False)
 
     # --- passwords -----------------------------------------------------------------------------
-    def hash_password(self, password: str) -> str:
-        """``password``'s argon2 hash; ``PasswordError`` if the policy refuses it, ``HashingBusy``."""
-        check_password(password)
+    def hash_password(self, password: str, name: str = "") -> str:
+        """``password``'s argon2 hash for user ``name``; ``PasswordError`` if the policy refuses it
+        (``password_policy``), ``HashingBusy``."""
+        check_password(password, name)
         with self._hashing_slot():
             return self.hasher.hash(password)
 
@@ -176,12 +170,16 @@ class Access:
         visitor holding it create an admin (``POST /api/auth/setup``); None otherwise."""
         if self.enabled and self.store.user_count() == 0:
             self.setup_token = secrets.token_urlsafe(24)
+            self.setup_expires_ns = self.clock() + int(SETUP_LINK_S * NS)
         else:
             self.setup_token = None
         return self.setup_token
 
     def setup_token_matches(self, token: str) -> bool:
-        return self.setup_token is not None and hmac.compare_digest(self.setup_token.encode(), token.encode())
+        """Whether ``token`` is the setup token and it has not expired (``SETUP_LINK_S``)."""
+        if self.setup_token is None or self.clock() >= self.setup_expires_ns:
+            return False
+        return hmac.compare_digest(self.setup_token.encode(), token.encode())
 
     # --- sessions ------------------------------------------------------------------------------
     def start_session(self, user: User) -> str:

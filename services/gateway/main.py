@@ -194,8 +194,9 @@ def announce_setup(access: Access, args: argparse.Namespace) -> None:
     if token is not None:
         scheme = "https" if args.tls_cert else "http"
         host = "THIS-HOST" if args.host in ("0.0.0.0", "::", "") else args.host  # a wildcard is no address to open
-        log.warning("no users yet. Create the first admin within this run at %s://%s:%d/login.html#setup=%s "
-                    "(the token works once), or with: bevflow users --db URL add NAME --role admin",
+        log.warning("no users yet. Create the first admin within the hour at %s://%s:%d/login.html#setup=%s "
+                    "(the token works once, for an hour; each start logs a new one), or with: "
+                    "bevflow users --db URL add NAME --role admin",
                     scheme, host, args.port, token)
 
 

@@ -22,11 +22,10 @@ from bevflow_services.gateway.auth import (
     Access,
     AccessDep,
     HashingBusy,
-    PasswordError,
     Viewer,
-    check_password,
     client_address,
 )
+from bevflow_services.gateway.password_policy import PasswordError
 from bevflow_services.storage.access import User, check_user_name
 
 log = logging.getLogger(__name__)
@@ -131,7 +130,7 @@ def setup(body: Setup, request: Request, response: Response, access: AccessDep) 
     access.limiter.succeeded("(setup)", client)
     try:
         check_user_name(body.name)
-        password_hash = access.hash_password(check_password(body.password))
+        password_hash = access.hash_password(body.password, body.name)
     except (ValueError, PasswordError) as exc:
         raise HTTPException(400, str(exc)) from None
     user = access.store.add_first_admin(body.name, password_hash, access.clock())

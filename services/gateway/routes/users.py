@@ -13,8 +13,9 @@ from pydantic import BaseModel, Field
 
 from bevflow.schemas import iso_utc
 
-from bevflow_services.gateway.auth import AccessDep, Admin, PasswordError, client_address, new_api_token
+from bevflow_services.gateway.auth import AccessDep, Admin, client_address, new_api_token
 from bevflow_services.gateway.params import Limit, Offset, Page, to_ns
+from bevflow_services.gateway.password_policy import PasswordError
 from bevflow_services.storage.access import ROLES
 
 router = APIRouter(prefix="/api", tags=["users"])
@@ -63,7 +64,7 @@ def users(_: Admin, access: AccessDep) -> list[UserView]:
 @router.post("/users", response_model=UserView, status_code=201, summary="Add a user")
 def add_user(body: NewUser, _: Admin, access: AccessDep) -> UserView:
     try:
-        user = access.store.add_user(body.name, body.role, access.hash_password(body.password), access.clock())
+        user = access.store.add_user(body.name, body.role, access.hash_password(body.password, body.name), access.clock())
     except (ValueError, PasswordError) as exc:
         raise HTTPException(409 if "already exists" in str(exc) else 400, str(exc)) from None
     return UserView(name=user.name, role=user.role, created=iso_utc(user.created_ns))
