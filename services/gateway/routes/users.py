@@ -1,5 +1,9 @@
 """``/api/users`` and ``/api/audit`` (admin only): accounts, API tokens, and who traced whom.
 
+Users are added, removed, given a new password or role; their API tokens made, listed and
+revoked. A new password ends the user's sessions and API tokens; whatever ends a credential also
+closes the websockets it opened (``streams.until_revoked``).
+
 ``bevflow users`` does the same from the command line, on the database directly.
 """
 
@@ -32,6 +36,14 @@ class NewUser(BaseModel):
     name: str = Field(min_length=1, max_length=64)
     role: str = Field(description=f"one of {', '.join(ROLES)}")
     password: str = Field(min_length=1, max_length=1024)
+
+
+class NewPassword(BaseModel):
+    password: str = Field(min_length=1, max_length=1024)
+
+
+class NewRole(BaseModel):
+    role: str = Field(description=f"one of {', '.join(ROLES)}")
 
 
 class NewToken(BaseModel):
@@ -89,6 +101,51 @@ def add_token(name: UserName, _: Admin, access: AccessDep, body: NewToken | None
     except KeyError:
         raise HTTPException(404, f"no user {name!r}") from None
     return TokenView(id=token.id, user=token.user, label=token.label, created=iso_utc(token.created_ns), token=secret)
+
+
+@router.get("/users/{name}/tokens", response_model=list[TokenView], summary="A user's API tokens (not the tokens themselves)")
+def tokens(name: UserName, _: Admin, access: AccessDep) -> list[TokenView]:
+    if access.store.user(name) is None:
+        raise HTTPException(404, f"no user {name!r}")
+    return [TokenView(id=t.id, user=t.user, label=t.label, created=iso_utc(t.created_ns)) for t in access.store.tokens(name)]
+
+
+@router.delete("/users/{name}/tokens/{token_id}", status_code=204,
+               summary="Revoke an API token (its open websockets close within a second)")
+def revoke_token(name: UserName, token_id: Annotated[int, Path(ge=0, le=2**63 - 1)], _: Admin, access: AccessDep) -> None:
+    if token_id not in {t.id for t in access.store.tokens(name)}:
+        raise HTTPException(404, f"{name!r} has no API token {token_id}")
+    try:
+        access.store.revoke_token(token_id)
+    except KeyError:  # revoked meanwhile
+        raise HTTPException(404, f"{name!r} has no API token {token_id}") from None
+
+
+@router.put("/users/{name}/password", status_code=204,
+            summary="Set a user's password (ends their sessions, API tokens and open websockets)")
+def set_password(name: UserName, body: NewPassword, _: Admin, access: AccessDep) -> None:
+    try:
+        access.store.set_password(name, access.hash_password(body.password, name))
+    except PasswordError as exc:
+        raise HTTPException(400, str(exc)) from None
+    except KeyError:
+        raise HTTPException(404, f"no user {name!r}") from None
+
+
+@router.put("/users/{name}/role", response_model=UserView, summary="Change a user's role")
+def set_role(name: UserName, body: NewRole, principal: Admin, access: AccessDep) -> UserView:
+    if name == principal.name:
+        raise HTTPException(400, "you cannot change your own role; another admin can")
+    try:
+        access.store.set_role(name, body.role)
+    except ValueError as exc:
+        raise HTTPException(400, str(exc)) from None
+    except KeyError:
+        raise HTTPException(404, f"no user {name!r}") from None
+    user = access.store.user(name)
+    if user is None:
+        raise HTTPException(404, f"no user {name!r}")
+    return UserView(name=user.name, role=user.role, created=iso_utc(user.created_ns))
 
 
 @router.get("/audit", response_model=Page[AuditView], summary="Who traced which person, when and from where")

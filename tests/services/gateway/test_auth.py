@@ -55,6 +55,10 @@ ROUTE_ROLES = {
     ("POST", "/api/users"): "admin",
     ("DELETE", "/api/users/{name}"): "admin",
     ("POST", "/api/users/{name}/tokens"): "admin",
+    ("GET", "/api/users/{name}/tokens"): "admin",
+    ("DELETE", "/api/users/{name}/tokens/{token_id}"): "admin",
+    ("PUT", "/api/users/{name}/password"): "admin",
+    ("PUT", "/api/users/{name}/role"): "admin",
     ("GET", "/api/audit"): "admin",
 }
 CALLERS = ("anonymous", "viewer", "operator", "admin")
@@ -69,7 +73,7 @@ def expected_status(needed: str, caller: str) -> str:
 
 def concrete(path: str) -> str:
     return path.replace("{track_id}", "1").replace("{camera_id}", "no-such-camera").replace(
-        "{alert_id}", "no-such-alert").replace("{name}", "no-such-user")
+        "{alert_id}", "no-such-alert").replace("{name}", "no-such-user").replace("{token_id}", "999")
 
 
 @pytest.fixture

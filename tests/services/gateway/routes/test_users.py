@@ -79,3 +79,38 @@ def test_tracing_is_audited_with_who_what_and_where(admin_client, state: Gateway
     assert client.get("/api/audit?user=admin").json()["total"] == 0
     page = client.get("/api/audit?limit=1&offset=1").json()
     assert (page["total"], [e["track_id"] for e in page["items"]]) == (3, [5])
+
+
+def test_an_admin_lists_and_revokes_a_users_tokens(admin_client) -> None:
+    client, secure = admin_client
+    made = client.post("/api/users/viewer/tokens", json={"label": "lobby screen"}).json()
+    listed = client.get("/api/users/viewer/tokens").json()
+    assert [(t["label"], t["token"]) for t in listed] == [("tests", None), ("lobby screen", None)]  # never the secret
+    assert client.delete(f"/api/users/operator/tokens/{made['id']}").status_code == 404  # not operator's
+    assert client.delete(f"/api/users/viewer/tokens/{made['id']}").status_code == 204
+    assert client.get("/api/occupancy", headers=bearer(made["token"])).status_code == 401
+    assert client.get("/api/occupancy", headers=bearer(secure.tokens["viewer"])).status_code == 200  # the other stays
+    assert client.get("/api/users/nobody/tokens").status_code == 404
+
+
+def test_a_new_password_ends_sessions_and_tokens(admin_client) -> None:
+    client, secure = admin_client
+    assert client.put("/api/users/viewer/password", json={"password": "aaaaaaaaaaaa"}).status_code == 400
+    assert client.put("/api/users/viewer/password", json={"password": "a fresh passphrase"}).status_code == 204
+    assert client.get("/api/occupancy", headers=bearer(secure.tokens["viewer"])).status_code == 401
+    client.headers.pop("Authorization")
+    assert client.post("/api/auth/login", json={"name": "viewer", "password": "a fresh passphrase"}).status_code == 200
+
+
+@pytest.mark.parametrize(("name", "role", "status"), [
+    ("viewer", "operator", 200), ("operator", "viewer", 200), ("viewer", "root", 400), ("nobody", "viewer", 404),
+    ("admin", "viewer", 400),  # not your own
+])
+def test_an_admin_changes_a_role(admin_client, name: str, role: str, status: int) -> None:
+    client, secure = admin_client
+    response = client.put(f"/api/users/{name}/role", json={"role": role})
+    assert response.status_code == status, response.text
+    if status == 200:
+        assert response.json()["role"] == role
+        needs_operator = client.get("/api/tracks/1", headers=bearer(secure.tokens[name])).status_code
+        assert (needs_operator != 403) == (role == "operator")
