@@ -37,6 +37,7 @@ from bevflow_services.gateway.state import GatewayState
 router = APIRouter()
 REPLAY_CHOICES = ("none", "active")
 # What sending to a client that has just gone away raises, depending on the server.
+from bevflow_services.gateway.routes.users import audited_stream
 CLIENT_GONE = (WebSocketDisconnect, OSError, RuntimeError)
 # How often an open stream's credential is checked again: revoking it ends the stream within this.
 RECHECK_S = 0.5
@@ -185,7 +186,7 @@ async def tracks_stream(websocket: WebSocket) -> None:
             newest_sent = tracks.time_ns
             await send_json(tracks)
 
-    async with state.tracks_stream.subscribe() as sub:
+    async with state.tracks_stream.subscribe() as sub, audited_stream(websocket, "live_tracks"):
         await websocket.accept()
         latest = state.tracks
         if latest is not None:

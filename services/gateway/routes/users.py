@@ -9,15 +9,19 @@ closes the websockets it opened (``streams.until_revoked``).
 
 from __future__ import annotations
 
+import time
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
 from datetime import datetime
 from typing import Annotated
 
 from fastapi import APIRouter, HTTPException, Path, Query, Request
+from starlette.requests import HTTPConnection
 from pydantic import BaseModel, Field
 
 from bevflow.schemas import iso_utc
 
-from bevflow_services.gateway.auth import AccessDep, Admin, client_address, new_api_token
+from bevflow_services.gateway.auth import AccessDep, Admin, client_address, get_access, new_api_token
 from bevflow_services.gateway.params import Limit, Offset, Page, to_ns
 from bevflow_services.gateway.password_policy import PasswordError
 from bevflow_services.storage.access import ROLES
@@ -62,7 +66,8 @@ class AuditView(BaseModel):
     time: str
     time_ns: int
     user: str
-    action: str = Field(description="trajectory, contacts or track_summaries")
+    action: str = Field(description="trajectory, contacts, track_summaries, or live_tracks (the /ws/tracks stream: "
+                                    "a row when it opens and one when it closes, saying how long it ran)")
     track_id: int | None
     client: str = Field(description="the address the request came from")
     detail: str
@@ -171,3 +176,19 @@ def record_trace(request: Request, access: AccessDep, action: str, track_id: int
     principal = getattr(request.state, "principal", None)
     who = principal.name if principal is not None else "unknown"
     access.store.audit(access.clock(), who, action, track_id, client_address(request), detail)
+
+
+@asynccontextmanager
+async def audited_stream(conn: HTTPConnection, action: str) -> AsyncIterator[None]:
+    """Audit rows for a live stream that shows where everyone is (``live_tracks``): one when it
+    opens and one when it closes, with how long it ran. Watching it long enough rebuilds paths,
+    which is tracing, so it is recorded like the routes that trace a person."""
+    access = get_access(conn)
+    principal = access.principal(conn)
+    who, client = (principal.name if principal is not None else "unknown"), client_address(conn)
+    access.store.audit(access.clock(), who, action, None, client, "opened")
+    started = time.monotonic()
+    try:
+        yield
+    finally:  # written at once, even when the stream's task is being cancelled
+        access.store.audit(access.clock(), who, action, None, client, f"closed after {time.monotonic() - started:.0f} s")

@@ -71,3 +71,21 @@ def test_taking_access_away_closes_open_streams(site: Site, state: GatewayState,
             assert closed_within(ws, 5.0) == 1008
             assert closed_within(other, 0.6) is None  # another user's stream goes on
             other.close()
+
+
+def test_watching_the_live_tracks_is_audited(site: Site, state: GatewayState) -> None:
+    access, tokens = secured_access()
+    state.apply(tracks(T0, {1: (0.0, 0.0)}))
+    with serve_in_thread(create_app(site, state, access=access)) as address:
+        with connect(f"ws://{address}/ws/tracks?token={tokens['viewer']}") as ws:
+            assert '"time_ns"' in ws.recv(timeout=5)
+            opened, _ = access.store.audit_log(user="viewer")
+            assert [(e.action, e.client, e.detail) for e in opened] == [("live_tracks", "127.0.0.1", "opened")]
+        deadline = time.monotonic() + 5.0
+        while len(entries := access.store.audit_log(user="viewer")[0]) < 2 and time.monotonic() < deadline:
+            time.sleep(0.05)
+    assert [e.detail.split(" after ")[0] for e in entries] == ["closed", "opened"]  # newest first
+    with serve_in_thread(create_app(site, state, access=access)) as address:  # the other streams are not tracing
+        with connect(f"ws://{address}/ws/alerts?token={tokens['operator']}") as ws:
+            assert closed_within(ws, 0.3) is None
+    assert access.store.audit_log(user="operator")[1] == 0
