@@ -173,11 +173,15 @@ class Thresholds(_Strict):
         ),
     )
     incident_min_duration_s: Annotated[float, Field(ge=0)] = Field(
-        default=30.0, description="a group of people too close becomes an incident once it has lasted this long")
+        default=45.0, description="a group of people too close becomes an incident once it has lasted this long")
     incident_quiet_s: Annotated[float, Field(ge=0)] = Field(
         default=15.0, description="an incident closes after this long without anyone in it too close")
     incident_ack_min_s: Annotated[float, Field(ge=0)] = Field(
         default=60.0, description="an incident that ended shorter than this (and small) needs no acknowledgement")
+    incident_companion_window_s: Annotated[float, Field(ge=0)] = Field(
+        default=10.0, description="people already close within this long of being first seen, and close for most of "
+        "the next as long, came in together (bevflow.analytics.companions): their closeness opens no incident; 0 "
+        "turns the rule off")
     site_capacity: Annotated[int, Field(ge=0)] | None = None
     capacity_hysteresis: Annotated[int, Field(ge=0)] = 2
     capacity_min_duration_s: Annotated[float, Field(ge=0)] = Field(

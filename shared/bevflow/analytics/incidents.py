@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike
 
+from bevflow.analytics.companions import Companions
 from bevflow.analytics.positions import NS_PER_S, FloatArray, IntArray, seconds_to_ns
 from bevflow.analytics.zones import ZoneIndex
 from bevflow.schemas import DistanceIncident
@@ -118,7 +119,8 @@ class IncidentTracker:
     events (rules above).
 
     >>> from bevflow.site import Thresholds
-    >>> tracker = IncidentTracker(Thresholds(incident_min_duration_s=1.0, incident_quiet_s=1.0))
+    >>> th = Thresholds(incident_min_duration_s=1.0, incident_quiet_s=1.0, incident_companion_window_s=0.0)
+    >>> tracker = IncidentTracker(th)
     >>> xy = [[0, 0], [1, 0], [1.5, 0.5]]
     >>> [[e.end_ns is None for e in tracker.update(t * NS_PER_S, [[1, 2], [2, 3]], [1, 2, 3], xy)] for t in range(3)]
     [[], [True], []]
@@ -133,6 +135,7 @@ class IncidentTracker:
         self.ack_min_ns = seconds_to_ns(thresholds.incident_ack_min_s)
         self.update_every_ns = seconds_to_ns(update_every_s)
         self._zones = ZoneIndex(zones)
+        self.companions = Companions(thresholds.incident_companion_window_s)
         self._candidates: list[_Candidate] = []
         self._merged: list[_Candidate] = []  # open incidents merged into an older one at this tick
         self._next_key = 0
@@ -147,7 +150,9 @@ class IncidentTracker:
         track ids and (N, 2) feet positions; returns the incidents that opened, changed or closed
         (closes first). A tick with no pairs lets every incident run towards its close."""
         t = int(time_ns)
-        groups = self._groups(np.asarray(pairs, dtype=np.int64).reshape(-1, 2), np.asarray(ids), np.asarray(xy, float))
+        self.companions.update(t, ids, pairs)
+        strangers = self.companions.strangers(pairs)
+        groups = self._groups(strangers, np.asarray(ids), np.asarray(xy, float))
         self._follow(groups, t)
         ended = [c for c in self._candidates if t - c.last_active_ns > self.quiet_ns]
         self._candidates = [c for c in self._candidates if c not in ended]

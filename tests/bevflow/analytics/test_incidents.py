@@ -10,6 +10,9 @@ from bevflow.schemas import DistanceIncident
 from bevflow.site import Thresholds, Zone
 
 S = 1_000_000_000
+# These tests script who is in violation when; arrival together (``bevflow.analytics.companions``)
+# has tests of its own, here it is off: every scripted pair is two strangers.
+NO_COMPANIONS = {"incident_companion_window_s": 0.0}
 # Where each track stands (metres): 1-4 and 5-6 around (0, 0), 7-8 far away at (30, 0).
 SPOT = {1: (0.0, 0.0), 2: (1.0, 0.0), 3: (1.5, 0.8), 4: (0.5, 1.2), 5: (0.2, 0.3), 6: (1.1, 0.2), 7: (30.0, 0.0), 8: (31.0, 0.0)}
 
@@ -17,7 +20,8 @@ SPOT = {1: (0.0, 0.0), 2: (1.0, 0.0), 3: (1.5, 0.8), 4: (0.5, 1.2), 5: (0.2, 0.3
 def run(script: list[tuple[int, list[tuple[int, int]]]], **thresholds: float) -> list[DistanceIncident]:
     """Feed (second, pairs in violation) ticks, one a second with nothing in between, then ten
     quiet seconds; every event published, in order."""
-    th = Thresholds(**{"incident_min_duration_s": 2.0, "incident_quiet_s": 2.0, "incident_ack_min_s": 5.0, **thresholds})
+    th = Thresholds(**{"incident_min_duration_s": 2.0, "incident_quiet_s": 2.0, "incident_ack_min_s": 5.0, **NO_COMPANIONS,
+                       **thresholds})
     tracker = IncidentTracker(th)
     events: list[DistanceIncident] = []
     by_second = dict(script)
@@ -73,7 +77,7 @@ def test_incidents_follow_groups(script: list[tuple[int, list[tuple[int, int]]]]
 
 def test_two_open_incidents_that_meet_merge_into_the_older() -> None:
     far = {**SPOT, 3: (6.0, 0.0), 4: (7.0, 0.0)}
-    th = Thresholds(incident_min_duration_s=2.0, incident_quiet_s=2.0)
+    th = Thresholds(incident_min_duration_s=2.0, incident_quiet_s=2.0, **NO_COMPANIONS)
     tracker = IncidentTracker(th)
     events = []
     for t in range(6):
@@ -120,9 +124,22 @@ def test_connected_groups(pairs: list[tuple[int, int]], expected: list[list[int]
 
 def test_an_incident_carries_where_who_and_how_close() -> None:
     zone = Zone(id="gate", polygon=[(-1, -1), (3, -1), (3, 3), (-1, 3)])
-    tracker = IncidentTracker(Thresholds(incident_min_duration_s=0.0), [zone])
+    tracker = IncidentTracker(Thresholds(incident_min_duration_s=0.0, **NO_COMPANIONS), [zone])
     (event,) = tracker.update(0, np.array([(1, 2), (2, 3)]), list(SPOT), list(SPOT.values()))
     assert event.zone == "gate" and event.tracks == [1, 2, 3] and event.current == [1, 2, 3] and event.people == 3
     assert event.min_distance_m == pytest.approx(np.hypot(0.5, 0.8))
     assert event.position == pytest.approx((2.5 / 3, 0.8 / 3))
     assert event.severity == "medium" and event.limit_m == 2.0
+
+
+def test_people_who_arrive_together_open_no_incident_and_strangers_still_do() -> None:
+    """1 and 2 are close from their first tick on (they came in together); 3 and 4 are seen
+    from the start but meet only at 5 s."""
+    th = Thresholds(incident_min_duration_s=2.0, incident_quiet_s=2.0, incident_companion_window_s=2.0)
+    tracker = IncidentTracker(th)
+    far = {**SPOT, 3: (6.0, 0.0), 4: (7.0, 0.0)}
+    events = []
+    for t in range(12):
+        pairs = [(1, 2)] + ([(3, 4)] if t >= 5 else [])
+        events += tracker.update(t * S, np.array(pairs), [1, 2, 3, 4], [far[i] for i in (1, 2, 3, 4)])
+    assert {tuple(e.tracks) for e in events} == {(3, 4)}
