@@ -327,6 +327,11 @@ class Keys:
         return f"{self.root}/events"
 
     @property
+    def open_alerts(self) -> str:
+        """The ids of the alerts the tracker still has open (``OpenAlerts``), renewing them."""
+        return f"{self.root}/alerts/open"
+
+    @property
     def truth(self) -> str:
         """Ground truth from a simulated ingest (``SimulatedTruth``)."""
         return f"{self.root}/sim/truth"

@@ -15,6 +15,7 @@ from collections.abc import Callable
 import numpy as np
 
 from bevflow.analytics.contacts import contacts
+from bevflow.alert_lease import LEASE_S
 from bevflow.analytics.trajectories import TrackHistory, Trajectory
 from bevflow.capture_time import CaptureWindow
 from bevflow.schemas import Contact, Event, Occupancy, Tracks
@@ -87,7 +88,8 @@ class DatabaseHistory:
 
     def events(self, query: EventQuery, limit: int, offset: int = 0) -> tuple[list[Event], int]:
         wanted = EventFilter(types=query.types, zone=query.zone, track=query.track, active=query.active,
-                             since_ns=query.since_ns, until_ns=self._until(query.until_ns))
+                             since_ns=query.since_ns, until_ns=self._until(query.until_ns),
+                             renewed_since_ns=self.clock() - int(LEASE_S * NS))
         return self.db.events(wanted, limit, offset)
 
     def trajectory(self, track_id: int, since_ns: int | None = None, until_ns: int | None = None) -> Trajectory | None:

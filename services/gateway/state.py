@@ -15,6 +15,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from bevflow.alert_lease import MAX_OPEN, RateLimit, lease_over
 from bevflow.capture_time import CaptureWindow
 from bevflow.schemas import (
     AlertMessage,
@@ -25,6 +26,7 @@ from bevflow.schemas import (
     EventBase,
     FrameHeader,
     Occupancy,
+    OpenAlerts,
     Tracks,
 )
 from bevflow.site import Site
@@ -37,7 +39,7 @@ from bevflow_services.gateway.history import HistoryStore, InMemoryHistory
 log = logging.getLogger(__name__)
 
 IGNORE_LOG_EVERY_S = 10.0
-StateMessage = Tracks | Occupancy | Event | FrameHeader | Detections2D | CameraCylinders
+StateMessage = Tracks | Occupancy | Event | OpenAlerts | FrameHeader | Detections2D | CameraCylinders
 
 
 @dataclass(frozen=True)
@@ -103,6 +105,9 @@ class GatewayState:
         self._tracks_received_ns: int | None = None
         self._occupancy: Occupancy | None = None
         self._active: dict[str, Event] = {}
+        # Gateway clock when each open alert last arrived or was renewed (bevflow.alert_lease).
+        self._renewed: dict[str, int] = {}
+        self._new_alerts = RateLimit()
         self._services: dict[tuple[str, str], ServiceEntry] = {}
         self.ignored = 0  # messages refused (other site, unknown camera), for /api/health
         self._last_ignore_log = -IGNORE_LOG_EVERY_S
@@ -116,6 +121,8 @@ class GatewayState:
             return self._apply_occupancy(message)
         if isinstance(message, EventBase):
             return self._apply_event(message)  # type: ignore[arg-type]
+        if isinstance(message, OpenAlerts):
+            return self._renew(message)
         if isinstance(message, (FrameHeader, Detections2D, CameraCylinders)):
             with self._lock:
                 known = self._cameras.record_frame(message.camera, message.seq, message.capture_ns, self.clock())
@@ -157,20 +164,54 @@ class GatewayState:
         return True
 
     def _apply_event(self, event: Event) -> bool:
+        now = self.clock()
         with self._lock:
+            if event.id not in self._active and not self._new_alerts.allow(now):
+                return self._ignore(f"alert {event.id!r}: more new alerts than the bus may bring (a flood)")
+            if event.id not in self._active and event.end_ns is None and len(self._active) >= MAX_OPEN:
+                return self._ignore(f"alert {event.id!r}: {MAX_OPEN} alerts are open already")
             if isinstance(event, CameraHealthEvent) and not self._cameras.record_event(event):
                 return self._ignore(f"{event.type} for unknown camera {event.camera!r}")
             if isinstance(event, CameraHealthEvent) and event.type == "camera_up":
                 # "up" is a moment, not a condition: it only ends the camera's open "down" alerts.
                 for other in [e for e in self._active.values() if e.type == "camera_down" and e.camera == event.camera]:
                     del self._active[other.id]
+                    self._renewed.pop(other.id, None)
             elif event.end_ns is None:
                 self._active[event.id] = event
+                self._renewed[event.id] = now
             else:
                 self._active.pop(event.id, None)
+                self._renewed.pop(event.id, None)
         self.history.add_event(event)
         self.alerts.publish(AlertMessage.from_event(event))
         return True
+
+    def _renew(self, renewal: OpenAlerts) -> bool:
+        if renewal.site not in self._site_names:
+            return self._ignore(f"open alerts for site {renewal.site!r}")
+        now = self.clock()
+        with self._lock:
+            for alert_id in renewal.ids:
+                if alert_id in self._renewed:
+                    self._renewed[alert_id] = now
+        return True
+
+    def end_lapsed_alerts(self) -> list[Event]:
+        """End the open alerts nobody renewed within the lease (forged, or left open by a tracker
+        that died): each ends at its last renewal, goes to the history and to the websocket
+        clients. Call it now and then on the thread that applies messages; returns what ended."""
+        now = self.clock()
+        with self._lock:
+            lapsed = [(self._active.pop(i), self._renewed.pop(i)) for i, t in list(self._renewed.items())
+                      if lease_over(t, now)]
+        ended = [e.model_copy(update={"end_ns": max(e.start_ns, renewed)}) for e, renewed in lapsed]
+        for event in ended:
+            self.history.add_event(event)
+            self.alerts.publish(AlertMessage.from_event(event))
+        if ended:
+            log.warning("%d open alerts ended by themselves: no renewal from the tracker for their lease", len(ended))
+        return ended
 
     def _ignore(self, why: str) -> bool:
         self.ignored += 1
@@ -217,9 +258,11 @@ class GatewayState:
         )
 
     def active_alerts(self) -> list[Event]:
-        """Alerts that have started and not ended, oldest first."""
+        """Alerts that have started and not ended (nor lapsed), oldest first."""
+        now = self.clock()
         with self._lock:
-            return sorted(self._active.values(), key=lambda e: (e.start_ns, e.id))
+            live = [e for e in self._active.values() if not lease_over(self._renewed[e.id], now)]
+        return sorted(live, key=lambda e: (e.start_ns, e.id))
 
     def camera_health(self) -> list[CameraHealth]:
         """Every site camera's health, in site order."""

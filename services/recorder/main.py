@@ -19,7 +19,7 @@ import sys
 import threading
 import time
 
-from bevflow.schemas import Event, Occupancy, Tracks
+from bevflow.schemas import Event, Occupancy, OpenAlerts, Tracks
 
 from bevflow_services import bus
 from bevflow_services.cli import UserError
@@ -89,6 +89,7 @@ def main(args: argparse.Namespace) -> int:
         bus.subscribe(session, keys.occupancy, bus.JsonCodec(Occupancy), recorder.on_occupancy, stats=stats),
         bus.subscribe(session, keys.tracks, bus.JsonCodec(Tracks), recorder.on_tracks, stats=stats),
         bus.HistorySubscription(session, keys.events, bus.JsonCodec(Event, "Event"), recorder.on_event, stats=stats),
+        bus.subscribe(session, keys.open_alerts, bus.JsonCodec(OpenAlerts), recorder.on_open_alerts, stats=stats),
     ]
     token = bus.announce(session, keys, SERVICE)  # after subscribing: "alive" means "recording"
     print(f"bevflow recorder: site {site_id!r} into {db.url}, commit every {args.commit_interval:g} s", flush=True)
@@ -122,6 +123,7 @@ def run(recorder: Recorder, policy: RetentionPolicy, stop: threading.Event, comm
             if time.monotonic() >= next_retention:
                 now = recorder.clock()
                 result = recorder.db.apply_retention(policy, now, latest_ns=recorder.window.latest_ns(now))
+                recorder.end_lapsed_alerts()
                 # A backlog (first run, a retention shortened) is worked off a slice per flush.
                 next_retention = time.monotonic() + (retention_every if result.done else 0.0)
             if down_since is not None:

@@ -22,8 +22,9 @@ import time
 from collections import Counter
 from collections.abc import Callable
 
+from bevflow.alert_lease import LEASE_S, NS, RateLimit
 from bevflow.capture_time import CaptureWindow
-from bevflow.schemas import Event, Occupancy, Tracks
+from bevflow.schemas import Event, Occupancy, OpenAlerts, Tracks
 
 from bevflow_services.storage import Batch, HistoryDatabase, StorageUnavailable, TrackSampler
 
@@ -41,6 +42,10 @@ class Recorder:
         window: how old (by ``clock``) occupancy and positions may be and still be stored
             (``bevflow.capture_time``; the bus refuses times in the future); older ones are counted
             in ``counts["outside_window"]``.
+
+    Alerts come at most at ``bevflow.alert_lease``'s rate (a flood is refused and counted in
+    ``counts["events_refused"]``), and ``end_lapsed_alerts`` ends the open ones the tracker stopped
+    renewing (``on_open_alerts``).
     """
 
     def __init__(self, db: HistoryDatabase, *, track_period_s: float = 1.0, max_pending_rows: int = 1_000_000,
@@ -52,6 +57,7 @@ class Recorder:
         self.counts: Counter[str] = Counter()
         self._lock = threading.Lock()
         self._pending = Batch()
+        self._alert_rate = RateLimit()
         # Resume sampling after the newest stored position, so a restart mid-second does not
         # store a second sample in the same period; a stored position beyond the clock (written
         # before the bus refused such times) is not one to resume after.
@@ -79,8 +85,24 @@ class Recorder:
 
     def on_event(self, event: Event) -> None:
         with self._lock:
+            if not self._alert_rate.allow(self.clock()):
+                self.counts["events_refused"] += 1
+                return
             self._pending.add_event(event)
             self.counts["events"] += 1
+
+    def on_open_alerts(self, renewal: OpenAlerts) -> None:
+        with self._lock:
+            self._pending.renewals.update(renewal.ids)
+            self.counts["renewals"] += 1
+
+    def end_lapsed_alerts(self) -> int:
+        """End the stored open alerts that nobody renewed within the lease; returns how many."""
+        ended = self.db.end_lapsed_events(self.clock() - int(LEASE_S * NS))
+        if ended:
+            self.counts["lapsed_alerts"] += ended
+            log.warning("%d open alerts ended by themselves: no renewal from the tracker for their lease", ended)
+        return ended
 
     # --- output, on the main thread -------------------------------------------------------------
     def pending(self) -> int:

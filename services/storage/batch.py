@@ -5,6 +5,7 @@ next one and written again, and replayed alerts can be written twice:
 
 - occupancy: the highest count per (second, zone); writing keeps the higher of stored and new;
 - alerts: the latest state per id; an end (``end_ns`` set) is final and a start never replaces it;
+- renewals: ids of open alerts the tracker still has open, whose lease restarts when written;
 - track positions: one per (track, time); writing an existing one changes nothing.
 
 ``TrackSampler`` decides which tracker ticks become stored positions: the first tick of each
@@ -39,9 +40,10 @@ class Batch:
     points: dict[tuple[int, int], tuple[float, float]] = field(default_factory=dict)
     tracks: dict[int, tuple[int, int]] = field(default_factory=dict)
     track_zones: dict[tuple[int, str], tuple[int, int]] = field(default_factory=dict)
+    renewals: set[str] = field(default_factory=set)
 
     def __len__(self) -> int:
-        return len(self.occupancy) + len(self.events) + len(self.points)
+        return len(self.occupancy) + len(self.events) + len(self.points) + len(self.renewals)
 
     def add_occupancy(self, occupancy: Occupancy) -> None:
         second = occupancy.time_ns // NS * NS
@@ -73,6 +75,7 @@ class Batch:
             _widen(self.tracks, track_id, first, last)
         for key, (first, last) in newer.track_zones.items():
             _widen(self.track_zones, key, first, last)
+        self.renewals |= newer.renewals
 
     def drop_oldest_samples(self, keep: int) -> int:
         """Keep at most ``keep`` occupancy rows and as many positions, dropping the oldest; alerts

@@ -45,6 +45,9 @@ class EventFilter:
     active: bool | None = None
     since_ns: int | None = None
     until_ns: int | None = None
+    # An open alert not written nor renewed since then has lapsed (``bevflow.alert_lease``): it is
+    # listed as ended, at its last renewal, even before the recorder closes it.
+    renewed_since_ns: int | None = None
 
 
 @dataclass(frozen=True)

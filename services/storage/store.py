@@ -44,6 +44,9 @@ UPSERT_EVENT = (
     "ON CONFLICT (id) DO UPDATE SET zone = excluded.zone, end_ns = excluded.end_ns, body = excluded.body, "
     "recorded_ns = excluded.recorded_ns WHERE events.end_ns IS NULL"
 )
+# A renewal (``OpenAlerts``) restarts an open alert's lease: ``recorded_ns`` is when its row was
+# last written or renewed.
+RENEW_EVENT = "UPDATE events SET recorded_ns = ? WHERE id = ? AND end_ns IS NULL"
 INSERT_EVENT_TRACK = "INSERT INTO event_tracks (track_id, event_id) VALUES (?, ?) ON CONFLICT DO NOTHING"
 INSERT_POINT = "INSERT INTO track_points (track_id, time_ns, x, y) VALUES (?, ?, ?, ?) ON CONFLICT DO NOTHING"
 UPSERT_TRACK = (
@@ -99,6 +102,7 @@ class HistoryDatabase(Database):
             tx.executemany(INSERT_POINT, [(i, t, x, y) for (i, t), (x, y) in sorted(batch.points.items())])
             tx.executemany(UPSERT_TRACK, [(i, a, b) for i, (a, b) in sorted(batch.tracks.items())])
             tx.executemany(UPSERT_TRACK_ZONE, [(i, z, a, b) for (i, z), (a, b) in sorted(batch.track_zones.items())])
+            tx.executemany(RENEW_EVENT, [(recorded, i) for i in sorted(batch.renewals)])
 
     @staticmethod
     def _write_events(tx: Transaction, events: list[Event], recorded_ns: int) -> None:
@@ -169,8 +173,12 @@ class HistoryDatabase(Database):
         if query.track is not None:
             where.append("id IN (SELECT event_id FROM event_tracks WHERE track_id = ?)")
             params.append(int64(query.track))
-        if query.active is not None:
+        lapsed = None if query.renewed_since_ns is None else int64(query.renewed_since_ns)
+        if query.active is not None and lapsed is None:
             where.append("end_ns IS NULL" if query.active else "end_ns IS NOT NULL")
+        elif query.active is not None:
+            where.append("(end_ns IS NULL AND recorded_ns >= ?)" if query.active else "(end_ns IS NOT NULL OR recorded_ns < ?)")
+            params.append(lapsed)
         if query.until_ns is not None:
             where.append("start_ns <= ?")
             params.append(int64(query.until_ns))
@@ -179,9 +187,22 @@ class HistoryDatabase(Database):
             params.append(int64(query.since_ns))
         (total,), = self.backend.query(f"SELECT COUNT(*) FROM events{_where(where)}", params)
         rows = self.backend.query(
-            f"SELECT body FROM events{_where(where)} ORDER BY start_ns DESC, id DESC LIMIT ? OFFSET ?",
+            f"SELECT body, end_ns, recorded_ns FROM events{_where(where)} ORDER BY start_ns DESC, id DESC LIMIT ? OFFSET ?",
             [*params, int64(limit), int64(offset)])
-        return [decode_event(body) for (body,) in rows], int(total)
+        events = [_lapsed(decode_event(body), recorded) if end is None and lapsed is not None and recorded < lapsed
+                  else decode_event(body) for body, end, recorded in rows]
+        return events, int(total)
+
+    def end_lapsed_events(self, renewed_before_ns: int) -> int:
+        """End the open alerts not written nor renewed since ``renewed_before_ns``, each at its last
+        renewal (``bevflow.alert_lease``); returns how many ended."""
+        with self.backend.transaction() as tx:
+            rows = tx.execute("SELECT body, recorded_ns FROM events WHERE end_ns IS NULL AND recorded_ns < ?",
+                              [int64(renewed_before_ns)])
+            ended = [_lapsed(decode_event(body), int(recorded)) for body, recorded in rows]
+            tx.executemany("UPDATE events SET end_ns = ?, body = ? WHERE id = ? AND end_ns IS NULL",
+                           [(e.end_ns, e.model_dump_json(), e.id) for e in ended])
+        return len(ended)
 
     def event(self, event_id: str) -> Event | None:
         rows = self.backend.query("SELECT body FROM events WHERE id = ?", [event_id])
@@ -293,6 +314,11 @@ class HistoryDatabase(Database):
         tables = ("occupancy", "occupancy_coarse", "events", "event_tracks", "tracks", "track_zones",
                   "track_points", "acknowledgements")
         return {t: int(self.backend.query(f"SELECT COUNT(*) FROM {t}")[0][0]) for t in tables}
+
+
+def _lapsed(event: Event, renewed_ns: int) -> Event:
+    """An open alert whose lease ran out, as ended at its last renewal."""
+    return event.model_copy(update={"end_ns": max(event.start_ns, int(renewed_ns))})
 
 
 def _pivot(rows: list[tuple[Any, ...]]) -> list[OccupancyPoint]:

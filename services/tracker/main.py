@@ -10,7 +10,9 @@ steps with it, and a ``DriftMonitor`` compares overlapping cameras' estimates of
 to raise a ``calibration_drift`` alert when a camera seems to have moved (``--no-drift`` turns that
 off). A camera silent for ``--camera-timeout`` seconds raises a ``camera_down`` alert, ended once
 it has reported again for ``--camera-up-after`` seconds without falling silent (a camera that keeps
-dropping out, on an overloaded machine, is one alert, not one per dropout).
+dropping out, on an overloaded machine, is one alert, not one per dropout). Every few seconds it
+publishes the ids of the alerts it still has open (``OpenAlerts``), which renews their lease: an
+open alert nobody renews ends by itself (``bevflow.alert_lease``).
 """
 
 from __future__ import annotations
@@ -22,10 +24,11 @@ import threading
 import time
 from pathlib import Path
 
+from bevflow.alert_lease import NS, RENEW_EVERY_S
 from bevflow.calibration.drift import DriftConfig
 from bevflow.live.assembler import TickAssembler
 from bevflow.live.site_tracker import SiteTracker
-from bevflow.schemas import CameraCylinders, CameraHealthEvent, Event, Occupancy, Tracks
+from bevflow.schemas import CameraCylinders, CameraHealthEvent, Event, Occupancy, OpenAlerts, Tracks
 
 from bevflow_services import bus
 from bevflow_services.cli import UserError
@@ -110,6 +113,26 @@ class CameraWatch:
         return events
 
 
+class OpenAlertBook:
+    """The alerts this tracker has raised and not ended, and when to renew them next."""
+
+    def __init__(self, site_id: str, renew_every_s: float = RENEW_EVERY_S) -> None:
+        self.site_id = site_id
+        self.ids: set[str] = set()
+        self.renew_every_ns = int(renew_every_s * NS)
+        self._next_ns: int | None = None
+
+    def observe(self, event: Event) -> None:
+        (self.ids.add if event.end_ns is None else self.ids.discard)(event.id)
+
+    def renewal(self, now_ns: int) -> OpenAlerts | None:
+        """The renewal to publish now, if one is due."""
+        if self._next_ns is not None and now_ns < self._next_ns:
+            return None
+        self._next_ns = now_ns + self.renew_every_ns
+        return OpenAlerts(site=self.site_id, time_ns=now_ns, ids=sorted(self.ids))
+
+
 def reserve_ids(reservation: TrackIdReservation, next_id: int) -> None:
     """Reserve ids before any new one leaves the process. If the disk fails, tracking goes on (a
     site without tracks is worse) and the log says that a restart may now reuse ids."""
@@ -149,6 +172,12 @@ def main(args: argparse.Namespace) -> int:
     tracks_out = bus.Publication(session, keys.tracks, bus.JsonCodec(Tracks))
     occupancy_out = bus.Publication(session, keys.occupancy, bus.JsonCodec(Occupancy))
     events_out = bus.CachedPublication(session, keys.events, bus.JsonCodec(Event, "Event"), cache=args.event_cache)
+    renewals_out = bus.Publication(session, keys.open_alerts, bus.JsonCodec(OpenAlerts))
+    open_alerts = OpenAlertBook(site_id)
+
+    def raise_alert(event: Event) -> None:
+        open_alerts.observe(event)
+        events_out.put(event)
     inbox = bus.subscribe(session, keys.cylinders("*"), bus.JsonCodec(CameraCylinders), on_cylinders, stats=stats)
     token = bus.announce(session, keys, SERVICE)
     drift = handler.drift.config if handler.drift is not None else None
@@ -163,7 +192,7 @@ def main(args: argparse.Namespace) -> int:
                     ticks = assembler.pop_ready(now_ns=now)
                     health = watch.check(now)
                 for event in health:
-                    events_out.put(event)
+                    raise_alert(event)
                 for tick in ticks:
                     try:
                         output = handler.handle(tick)
@@ -176,11 +205,14 @@ def main(args: argparse.Namespace) -> int:
                     tracks_out.put_json(output.tracks_json)
                     occupancy_out.put(output.occupancy)
                     for event in output.events:
-                        events_out.put(event)
+                        raise_alert(event)
+                renewal = open_alerts.renewal(now)
+                if renewal is not None:
+                    renewals_out.put(renewal)
     finally:
         token.undeclare()
         inbox.close()
-        for publication in (tracks_out, occupancy_out, events_out):
+        for publication in (tracks_out, occupancy_out, events_out, renewals_out):
             publication.close()
         session.close()
         log.info("tracker stopped; next track id %d; assembler %s", tracker.tracker.next_id, dict(assembler.counts))

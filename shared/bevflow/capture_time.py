@@ -12,7 +12,7 @@ rule would refuse the true messages that follow until the wall clock caught up (
 - live state (the gateway's latest tracks and occupancy, the recorder's samples) refuses data
   older than ``past_s``: it is no longer live, and storing it only makes holes in the history.
   Alerts are exempt from the past bound, since an over-capacity alert may have started hours ago;
-  they end by themselves instead (``bevflow_services.alert_lease``).
+  they end by themselves instead (``bevflow.alert_lease``).
 
 Both bounds can be set per process with ``BEVFLOW_CLOCK_FUTURE_S`` and ``BEVFLOW_CLOCK_PAST_S``.
 

@@ -370,6 +370,15 @@ def decode_event(payload: bytes | str) -> Event:
     return EVENT_ADAPTER.validate_json(payload)
 
 
+class OpenAlerts(Message):
+    """The ids of the alerts the tracker still has open, published every few seconds: it renews
+    their lease (``bevflow.alert_lease``), and an open alert nobody renews ends by itself."""
+
+    site: str
+    time_ns: Annotated[int, Field(ge=0)]
+    ids: list[str] = Field(default_factory=list)
+
+
 # --- to websocket and REST clients ---------------------------------------------------------------
 def iso_utc(time_ns: int) -> str:
     """``time_ns`` (nanoseconds since the Unix epoch) as ISO-8601 UTC with milliseconds and a ``Z``."""

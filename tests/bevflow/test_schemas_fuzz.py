@@ -44,6 +44,7 @@ VALID_MESSAGES: dict[str, tuple[Any, dict[str, Any]]] = {
                                          "shift_m": 0.3, "reference_camera": "b"}),
     "CameraHealthEvent": (schemas.Event, {"type": "camera_down", "id": "ch", "start_ns": 1, "camera": "a",
                                           "reason": "no frames"}),
+    "OpenAlerts": (schemas.OpenAlerts, {"site": "s", "time_ns": 5, "ids": ["dv", "oc"]}),
 }
 VALID_MESSAGES["AlertMessage"] = (schemas.AlertMessage, json.loads(schemas.AlertMessage.from_event(
     schemas.decode_event(json.dumps(VALID_MESSAGES["DistanceViolation"][1]))).model_dump_json()))

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from bevflow.alert_lease import LEASE_S
 from bevflow.capture_time import CaptureWindow
 from bevflow.schemas import TrackState, Tracks
 
@@ -112,3 +113,15 @@ def test_occupancy_without_a_start_is_the_last_day_not_the_whole_database(db: Hi
     assert [s.total for s in stored.occupancy()] == [2, 9, 3]  # the range includes both ends
     assert [s.total for s in stored.occupancy(until_ns=T0 + 86400 * S)] == [1, 2]
     assert [s.total for s in stored.occupancy(since_ns=T0)] == [1, 2, 9, 3]
+
+
+def test_a_restarted_gateway_does_not_serve_forged_alerts_as_active_for_ever(db: HistoryDatabase) -> None:
+    """After a flood of forged alerts, /api/alerts?active=true listed 99,120 active alerts, even
+    after a gateway restart: nothing ended them."""
+    recorder = Recorder(db, clock=lambda: T0)
+    for k in range(500):
+        recorder.on_event(violation(f"forged-{k}", T0))
+    recorder.flush()
+    restarted = DatabaseHistory(db, clock=lambda: T0 + int(LEASE_S * S) + S)  # no renewal came
+    assert restarted.events(EventQuery(active=True), 10) == ([], 0)
+    assert restarted.events(EventQuery(active=False), 10)[1] == 500

@@ -2,7 +2,8 @@ from __future__ import annotations
 
 import pytest
 
-from bevflow.schemas import CameraHealthEvent, Detections2D, FrameHeader, TrackState, Tracks
+from bevflow.alert_lease import BURST, LEASE_S
+from bevflow.schemas import CameraHealthEvent, Detections2D, FrameHeader, OpenAlerts, TrackState, Tracks
 
 from bevflow_services.gateway.history import EventQuery
 from bevflow_services.gateway.state import GatewayState
@@ -58,6 +59,34 @@ def test_active_alerts_follow_start_and_end_messages_with_the_same_id(state: Gat
     assert [e.id for e in state.active_alerts()] == ["c1"]
     stored, total = state.history.events(EventQuery(), 10)
     assert total == 2 and stored[1].end_ns == T0 + 3 * S  # the end replaced the start in the history
+
+
+@pytest.mark.parametrize("renewed", [False, True], ids=["forged", "renewed-by-the-tracker"])
+def test_an_open_alert_nobody_renews_ends_by_itself(state: GatewayState, clock: FakeClock, renewed: bool) -> None:
+    state.apply(violation("v1", T0))
+    for _ in range(4):
+        clock.advance(LEASE_S / 3)
+        if renewed:
+            assert state.apply(OpenAlerts(site="hall", time_ns=clock.now, ids=["v1", "unknown"]))
+        ended = state.end_lapsed_alerts()
+    assert [e.id for e in state.active_alerts()] == (["v1"] if renewed else [])
+    assert [(e.id, e.end_ns) for e in ended] == ([] if renewed else [("v1", T0)])  # ended at its last renewal
+    stored, _ = state.history.events(EventQuery(active=True), 10)
+    assert [e.id for e in stored] == (["v1"] if renewed else [])
+
+
+def test_a_flood_of_forged_alerts_is_refused_beyond_the_rate_and_ends_by_itself(state: GatewayState,
+                                                                                clock: FakeClock) -> None:
+    flood = 3 * BURST
+    accepted = sum(state.apply(violation(f"forged-{k}", T0)) for k in range(flood))
+    assert accepted == BURST and state.ignored == flood - BURST
+    clock.advance(1.0)
+    assert state.apply(violation("real", T0 + S))  # the bucket refills at its rate
+    clock.advance(LEASE_S)
+    state.apply(OpenAlerts(site="hall", time_ns=clock.now, ids=["real"]))
+    clock.advance(1.0)
+    assert len(state.end_lapsed_alerts()) == BURST
+    assert [e.id for e in state.active_alerts()] == ["real"]
 
 
 def test_camera_up_ends_the_cameras_open_down_alert(state: GatewayState) -> None:

@@ -56,6 +56,9 @@ class Loop:
     def pending(self) -> int:
         return 0
 
+    def end_lapsed_alerts(self) -> int:
+        return 0
+
     def apply_retention(self, policy: RetentionPolicy, now_ns: int, latest_ns: int | None = None) -> RetentionResult:
         self.retentions += 1
         self.latest_ns.append(latest_ns and latest_ns - now_ns)

@@ -6,6 +6,9 @@ from pathlib import Path
 
 import pytest
 
+from bevflow.alert_lease import BURST, LEASE_S
+from bevflow.schemas import OpenAlerts
+
 from bevflow_services.recorder.recorder import Recorder
 from bevflow_services.storage import Batch, EventFilter, HistoryDatabase, StorageUnavailable
 from tests.services.gateway.feed import S, T0, occupancy, tracks, violation
@@ -123,3 +126,24 @@ def test_capture_times_older_than_the_live_window_are_counted_not_stored(db: His
     recorder.on_occupancy(occupancy(time_ns, 3))
     assert recorder.pending() == (1 + 3 if stored else 0)
     assert recorder.counts["outside_window"] == (0 if stored else 2)
+
+
+def test_a_flood_of_alerts_is_refused_beyond_the_rate_and_what_got_in_ends_by_itself(db: HistoryDatabase) -> None:
+    """10,000 forged alerts a second for 10 s used to be stored, all active for ever."""
+    clock = [NOW]
+    recorder = Recorder(db, clock=lambda: clock[0])
+    for second in range(10):
+        clock[0] = NOW + second * S
+        for k in range(10_000):
+            recorder.on_event(violation(f"forged-{second}-{k}", T0))
+    clock[0] = NOW + 10 * S
+    recorder.on_event(violation("real", T0))  # the rate refills: a real alert after the flood gets in
+    recorder.flush()
+    stored = db.row_counts()["events"]
+    assert stored <= BURST + 11 * 100 and recorder.counts["events_refused"] == 100_001 - stored
+    recorder.on_open_alerts(OpenAlerts(site="hall", time_ns=T0, ids=["real"]))
+    clock[0] += int(LEASE_S * S)
+    recorder.flush()  # the renewal is written at the recorder's clock
+    clock[0] += 2 * S
+    assert recorder.end_lapsed_alerts() == stored - 1
+    assert [e.id for e in db.events(EventFilter(active=True), 10)[0]] == ["real"]

@@ -251,3 +251,22 @@ def test_the_newest_position_ignores_rows_beyond_a_bound(paths: HistoryDatabase)
     assert newest is not None
     assert paths.newest_track_time_ns(until_ns=newest - 1) < newest
     assert paths.newest_track_time_ns(until_ns=0) is None
+
+
+def test_an_open_alert_not_renewed_lapses_and_the_recorder_ends_it(db: HistoryDatabase) -> None:
+    """Forged open alerts used to stay active for ever, across gateway restarts too."""
+    batch = Batch()
+    for name in ("forged", "real"):
+        batch.add_event(violation(name, T0))
+    db.write(batch, recorded_ns=T0)
+    renewal = Batch()
+    renewal.renewals = {"real", "unknown"}
+    db.write(renewal, recorded_ns=T0 + 50 * S)
+    lapsed_before = T0 + 10 * S
+    active, total = db.events(EventFilter(active=True, renewed_since_ns=lapsed_before), 10)
+    assert [e.id for e in active] == ["real"] and total == 1
+    ended, _ = db.events(EventFilter(active=False, renewed_since_ns=lapsed_before), 10)
+    assert [(e.id, e.end_ns) for e in ended] == [("forged", T0)]  # shown ended at its last renewal
+    assert db.end_lapsed_events(lapsed_before) == 1
+    assert db.event("forged").end_ns == T0 and db.event("real").end_ns is None
+    assert [e.id for e in db.events(EventFilter(active=True), 10)[0]] == ["real"]

@@ -1,6 +1,8 @@
 from __future__ import annotations
 
-from bevflow_services.tracker.main import CameraWatch
+from bevflow.schemas import CameraHealthEvent, OverCapacity
+
+from bevflow_services.tracker.main import CameraWatch, OpenAlertBook
 
 S = 1_000_000_000
 
@@ -29,3 +31,17 @@ def test_a_camera_that_keeps_dropping_out_is_one_alert_until_it_reports_steadily
     assert (ended.id, ended.end_ns) == (down.id, 16 * S)  # one outage, ended when the steady stretch began
     assert up.type == "camera_up" and up.start_ns == 16 * S
     assert watch.check(35 * S) == []
+
+
+def test_the_tracker_renews_the_alerts_it_has_open_every_few_seconds() -> None:
+    book = OpenAlertBook("hall", renew_every_s=15.0)
+    S = 1_000_000_000
+    book.observe(OverCapacity(id="c1", start_ns=0, capacity=3, peak=4))
+    book.observe(CameraHealthEvent(id="down", type="camera_down", camera="a", start_ns=0))
+    first = book.renewal(10 * S)
+    assert first is not None and (first.site, first.time_ns, first.ids) == ("hall", 10 * S, ["c1", "down"])
+    assert book.renewal(24 * S) is None  # not due yet
+    book.observe(OverCapacity(id="c1", start_ns=0, end_ns=20 * S, capacity=3, peak=4))
+    book.observe(CameraHealthEvent(id="up", type="camera_up", camera="a", start_ns=21 * S, end_ns=21 * S))
+    due = book.renewal(25 * S)
+    assert due is not None and due.ids == ["down"]

@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 from fastapi.testclient import TestClient
 
+from bevflow.capture_time import CaptureWindow
 from bevflow.schemas import Occupancy, Tracks
 from bevflow.site import Site
 
@@ -58,7 +59,9 @@ def gateway_over(kind: str, site: Site, clock: FakeClock, folder: Path) -> Itera
     store: HistoryStore = InMemoryHistory(retention_s=7 * 86400)
     if kind != "memory":
         db = HistoryDatabase.open(new_database_url(kind, folder))
-        store, recorder = DatabaseHistory(db), Recorder(db, clock=clock)
+        # The feeds' capture times run ahead of the test clock, which stands still.
+        ahead = CaptureWindow(future_s=30 * 86400)
+        store, recorder = DatabaseHistory(db, clock=clock, window=ahead), Recorder(db, clock=clock)
     state = GatewayState(site, store, clock=clock)
     try:
         with TestClient(create_app(site, state)) as client:
