@@ -31,6 +31,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from bevflow.detect.providers import check_providers
 from bevflow.detect.runtime import Detector, DetectorError
 from bevflow.detect.window import detection_window, scaled_window
 from bevflow.detections import Boxes
@@ -57,6 +58,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--threads", type=int, default=2, help="ONNX Runtime threads per inference (default 2)")
     group.add_argument("--score-threshold", type=float, default=0.4,
                        help="lowest confidence of a reported person, 0 to 1 (default 0.4)")
+    group.add_argument("--providers", default=None, metavar="LIST",
+                       help="ONNX Runtime execution providers, most wanted first, e.g. cuda,cpu or openvino,cpu "
+                       "(default: the site file's detector_providers, else cpu); missing ones fall back with a warning")
     group.add_argument("--whole-frame", action="store_true",
                        help="run the detector on the whole frame, not only the part that shows the camera's "
                        "monitored radius (slower; finds people the projector then drops)")
@@ -147,10 +151,11 @@ def main(args: argparse.Namespace) -> int:
     site_path = Path(args.site)
     site_dir = site_path.parent if site_path.is_file() else None
     try:
+        providers = check_providers(args.providers.split(",")) if args.providers is not None else site.detector_providers
         models = CameraModels(site, cameras, site_dir=site_dir, default=args.model, threads=args.threads,
-                              score_threshold=args.score_threshold)
+                              score_threshold=args.score_threshold, providers=providers)
     except (DetectorError, ValueError) as exc:
-        raise UserError(str(exc)) from None
+        raise UserError(f"--providers: {exc}" if "provider" in str(exc) else str(exc)) from None
     worker = FrameDetector(site, models.detectors, whole_frame=args.whole_frame)
     keys = bus.Keys(site_id)
     stats = bus.BusStats()
@@ -160,7 +165,8 @@ def main(args: argparse.Namespace) -> int:
     inboxes = {c: _Inbox(session, keys.frame(c), stats, wake) for c in cameras}
     publications = {c: bus.Publication(session, keys.detections(c), codec) for c in cameras}
     token = bus.announce(session, keys, SERVICE)
-    print(f"bevflow detector: site {site_id!r}, {len(cameras)} cameras, models {models.models()}", flush=True)
+    print(f"bevflow detector: site {site_id!r}, {len(cameras)} cameras, models {models.models()}, "
+          f"on {', '.join(models.providers())}", flush=True)
     try:
         with stop_on_signals() as stop:
             serve(inboxes, publications, worker, stats, stop, wake)

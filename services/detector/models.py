@@ -23,6 +23,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
+from bevflow.detect.providers import DEFAULT_PROVIDERS
 from bevflow.detect.runtime import DEFAULT_MODEL, DEFAULT_RANGES, Detector, DetectorBank, DetectorError, HeightRange
 from bevflow.detect.tiles import RIM_TILES, TILE_MODEL, RimTileDetector
 from bevflow.site import Site
@@ -64,9 +65,10 @@ class CameraModels:
         ranges: Sequence[HeightRange] | None = None,
         threads: int = 2,
         score_threshold: float = 0.4,
+        providers: Sequence[str] = DEFAULT_PROVIDERS,
         load: type[Detector] = Detector,
     ) -> None:
-        options = {"score_threshold": score_threshold}
+        options = {"score_threshold": score_threshold, "providers": providers}
         by_path: dict[Path, Detector] = {}
         tiles: list[RimTileDetector] = []  # one tile detector serves every camera that asks for it
 
@@ -100,6 +102,11 @@ class CameraModels:
 
     def __getitem__(self, camera: str) -> Detector | RimTileDetector:
         return self.detectors[camera]
+
+    def providers(self) -> list[str]:
+        """The execution providers the loaded models run on (the first of each), for the start-up log."""
+        sessions = [d.tile_detector if isinstance(d, RimTileDetector) else d for d in self.detectors.values()]
+        return sorted({p[0] for d in sessions if (p := getattr(d, "providers", None))})
 
     def models(self) -> dict[str, str]:
         """The model file of each camera, for the start-up log."""

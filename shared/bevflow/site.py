@@ -21,6 +21,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator, model_validator
 
 from bevflow.camera import Camera, make_camera, rotation_from_ypr
+from bevflow.detect.providers import DEFAULT_PROVIDERS, check_providers
 
 PositiveFloat = Annotated[float, Field(gt=0)]
 
@@ -279,11 +280,21 @@ class Site(_Strict):
     detectors: list[DetectorRange] | None = Field(
         default=None, description="detector model by mounting height; default: the shipped model for every height"
     )
+    detector_providers: list[str] = Field(
+        default_factory=lambda: list(DEFAULT_PROVIDERS),
+        description="ONNX Runtime execution providers for the detector, most wanted first (tensorrt, cuda, openvino, "
+        "cpu); those the installed build lacks are skipped with a warning, and the CPU is always the last resort",
+    )
 
     @property
     def crowded_level(self) -> int | None:
         """The whole site's crowded level: the default share of ``thresholds.site_capacity``."""
         return crowded_level_of(self.thresholds.site_capacity)
+
+    @field_validator("detector_providers")
+    @classmethod
+    def _known_providers(cls, names: list[str]) -> list[str]:
+        return check_providers(names)
 
     @field_validator("detectors")
     @classmethod

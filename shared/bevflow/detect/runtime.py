@@ -17,6 +17,7 @@ their padded sizes match (cameras at the same height), which amortises the per-c
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,9 +27,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bevflow.detect.decoders import FORMATS, decode_centernet, decode_fastestdet, decode_yolov5, decode_yolov8, decode_yolox, guess_format, nms
+from bevflow.detect.providers import DEFAULT_PROVIDERS, plan_providers
 from bevflow.detect.scaling import scale_factor
 from bevflow.detections import Boxes
 
+_log = logging.getLogger(__name__)
 DEFAULT_MODEL = Path(__file__).resolve().parent.parent / "data" / "models" / "bevflow-person-centernet.onnx"
 PAD_MULTIPLE = 32
 LETTERBOX_GREY = 114
@@ -72,11 +75,14 @@ class Detector:
         rgb: bool | None = None,
         input_scale: float | None = None,
         session: object | None = None,
+        providers: Sequence[str] = DEFAULT_PROVIDERS,
     ) -> None:
         self.model_path = Path(model_path) if model_path is not None else DEFAULT_MODEL
         # ``session``: anything with ONNX Runtime's get_inputs / get_outputs / run (tests, or a
-        # session built with other execution providers).
-        self.session = session if session is not None else _load_session(self.model_path, threads)
+        # session built elsewhere).
+        self.session = session if session is not None else _load_session(self.model_path, threads, providers)
+        used = getattr(self.session, "get_providers", None)  # test doubles may have none
+        self.providers: list[str] = list(used()) if used is not None else []
         inp = self.session.get_inputs()[0]
         self.input_name = inp.name
         h, w = inp.shape[2], inp.shape[3]
@@ -177,8 +183,12 @@ class Detector:
         return Boxes(xyxy=xyxy, confidence=scores)
 
 
-def _load_session(path: Path, threads: int) -> object:
+def _load_session(path: Path, threads: int, providers: Sequence[str] = DEFAULT_PROVIDERS) -> object:
     import onnxruntime as ort  # imported here so the rest of the core library loads without it
+
+    plan = plan_providers(providers, ort.get_available_providers())
+    if plan.unavailable:
+        _log.warning("%s: %s", path.name, plan.describe())
 
     if not path.is_file():
         raise DetectorError(f"detector model {path} does not exist")
@@ -190,7 +200,7 @@ def _load_session(path: Path, threads: int) -> object:
     # per frame with 2 threads and made each frame slower, not faster.
     options.add_session_config_entry("session.intra_op.allow_spinning", "0")
     try:
-        return ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+        return ort.InferenceSession(str(path), options, providers=plan.use)
     except Exception as exc:  # onnxruntime raises its own exception types
         raise DetectorError(f"cannot load detector model {path}: {exc}") from None
 

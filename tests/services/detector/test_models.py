@@ -5,7 +5,7 @@ from pathlib import Path
 import pytest
 
 from bevflow.detect.runtime import DEFAULT_MODEL, DEFAULT_RANGES, LOW_CEILING_MODEL, DetectorBank, DetectorError, HeightRange
-from bevflow.site import parse_site
+from bevflow.site import SiteError, parse_site
 
 from bevflow_services.detector.models import CameraModels, resolve_model, shipped_model_names
 
@@ -49,9 +49,11 @@ def test_cameras_get_their_own_model_or_the_one_for_their_height(tmp_path: Path)
     own = tmp_path / "own.onnx"
     own.write_bytes(b"onnx")
     site = parse_site(SITE % "own.onnx")
-    models = CameraModels(site, site_dir=tmp_path, threads=3, score_threshold=0.6, load=FakeDetector)
+    models = CameraModels(site, site_dir=tmp_path, threads=3, score_threshold=0.6, providers=["cuda", "cpu"],
+                          load=FakeDetector)
     assert models["own"].model_path == own.resolve()
-    assert models["own"].threads == 3 and models["own"].options == {"score_threshold": 0.6}
+    assert models["own"].threads == 3
+    assert models["own"].options == {"score_threshold": 0.6, "providers": ["cuda", "cpu"]}
     # Cameras naming no model: the height ranges (by default the shipped low-ceiling model under
     # 5 m, the general one above).
     assert models["low"].model_path == LOW_CEILING_MODEL and models["high"].model_path == DEFAULT_MODEL
@@ -133,3 +135,18 @@ def test_rim_tiles_names_the_rotation_aware_detector_shared_by_the_cameras_askin
     assert models["own"].tile_detector.model_path == TILE_MODEL
     assert models["own"].centre.model_path == DEFAULT_MODEL.resolve()
     assert models.models()["own"] == "rim-tiles"
+
+
+@pytest.mark.parametrize(
+    ("line", "expected"),
+    [("", ["cpu"]), ("detector_providers: [OpenVINO, cpu]\n", ["openvino", "cpu"]),
+     ("detector_providers: [tensorrt, cuda, cpu]\n", ["tensorrt", "cuda", "cpu"])],
+)
+def test_the_site_file_names_the_providers(line: str, expected: list[str]) -> None:
+    assert parse_site(line + SITE % "null").detector_providers == expected
+
+
+@pytest.mark.parametrize("line", ["detector_providers: [gpu]\n", "detector_providers: []\n"])
+def test_an_unknown_provider_is_refused_when_the_site_is_read(line: str) -> None:
+    with pytest.raises(SiteError, match="detector_providers.*choose from tensorrt, cuda, openvino, cpu"):
+        parse_site(line + SITE % "null")
