@@ -77,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
                "replayed": f"the boxes recorded in {args.detections}"}[boxes]
         print(f"bevflow demo is running ({len(group.children)} services, {how}, logs in {log_dir})")
         print(f"  dashboard  {base}/")
-        print(f"  3D view    http://127.0.0.1:{args.port + 1}/")
+        print(f"  3D view    {base}/view3d/")
         print(f"  REST API   {base}/docs")
         print("Stop with Ctrl-C." if args.duration is None else f"Stopping after {args.duration:g} s.", flush=True)
         deadline = None if args.duration is None else time.monotonic() + args.duration

@@ -40,6 +40,7 @@ from bevflow_services.gateway.routes import probes
 from bevflow_services.gateway.routes import reports
 from bevflow_services.gateway.routes import site as site_routes
 from bevflow_services.gateway.routes import users as users_routes
+from bevflow_services.gateway.routes import view3d as view3d_routes
 from bevflow_services.gateway.state import GatewayState
 
 log = logging.getLogger(__name__)
@@ -72,7 +73,6 @@ def create_app(
     *,
     dashboard_dir: Path | None = None,
     view3d_port: int | None = None,
-    view3d_host: str = "127.0.0.1",
     view3d_rate_hz: float = 5.0,
     feed: Callable[[], AbstractAsyncContextManager[object]] | None = None,
     access: Access | None = None,
@@ -82,7 +82,8 @@ def create_app(
     Args:
         dashboard_dir: folder served at ``/`` (default: the installed dashboard); ``/`` shows a
             placeholder page while it has no ``index.html``.
-        view3d_port: port of the viser 3D view, started with the app's lifespan; None: no 3D view.
+        view3d_port: loopback port of the viser 3D view, started with the app's lifespan and served
+            through the gateway at ``/view3d/``; None: no 3D view.
         feed: entered for the app's lifespan, after the 3D view starts: what feeds ``state``
             (``main`` passes the bus subscriptions).
         access: users, roles and security settings (see ``auth``); None: no login, every request
@@ -98,7 +99,8 @@ def create_app(
         if view3d_port is not None:
             from bevflow_services.gateway.view3d import View3D
 
-            view = View3D(state, host=view3d_host, port=view3d_port, rate_hz=view3d_rate_hz)
+            # Loopback only: viser has no login; browsers reach it through /view3d (routes.view3d).
+            view = View3D(state, host="127.0.0.1", port=view3d_port, rate_hz=view3d_rate_hz)
             view.start()
             app.state.view3d_port = view.port
         try:
@@ -139,7 +141,7 @@ def create_app(
     for module in (occupancy, intervals, tracks, alerts, cameras, site_routes, history_routes, reports, metrics_routes):
         app.include_router(module.router, dependencies=viewer)
     app.include_router(calibration_routes.router, dependencies=admin)
-    for module in (health, probes, streams, acknowledge, auth_routes, users_routes):
+    for module in (health, probes, streams, acknowledge, auth_routes, users_routes, view3d_routes):
         app.include_router(module.router)
     app.add_exception_handler(RequestValidationError, _validation_error)
     app.add_exception_handler(HashingBusy, _hashing_busy)

@@ -118,7 +118,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--host", default="127.0.0.1", help="address to serve on (0.0.0.0 for every interface)")
     group.add_argument("--port", type=int, default=8000, help="HTTP port of the API and dashboard (default 8000)")
     group.add_argument("--view3d-port", type=int, default=None,
-                       help="port of the 3D view (default: --port + 1; the next free one if taken)")
+                       help="loopback port of the 3D view, which the gateway serves at /view3d/ behind its login "
+                       "(default: --port + 1; the next free one if taken)")
     group.add_argument("--no-view3d", action="store_true", help="do not start the 3D view")
     group.add_argument("--history-s", type=float, default=3600.0,
                        help="seconds of occupancy, alert and trajectory history kept in memory (default 3600)")
@@ -209,7 +210,7 @@ def main(args: argparse.Namespace) -> int:
     session = open_session(config_from_args(args))
     stats = BusStats()
     state = GatewayState(site, history_store(args.db, args.history_s), site_id=site_id)
-    app = create_app(site, state, view3d_port=view3d_port, view3d_host=args.host, feed=bus_feed(session, state, stats),
+    app = create_app(site, state, view3d_port=view3d_port, feed=bus_feed(session, state, stats),
                      access=access)
     app.state.bus_stats = stats
     # The calibration page: saves go to the site file (none for a built-in site); the projectors'

@@ -59,7 +59,7 @@ def test_3d_view_opens_in_a_panel_and_links_to_a_new_tab(chromium: Chromium, gat
         app.state.view3d_port = view_port  # what the lifespan sets when it starts viser
         page = open_dashboard(chromium, f"http://127.0.0.1:{port}/")
         try:
-            url = f"http://127.0.0.1:{view_port}/"
+            url = f"http://127.0.0.1:{port}/view3d/"  # through the gateway, which relays viser
             page.wait_for("!document.getElementById('view3d-toggle').disabled", what="the 3D button")
             assert page.evaluate("document.getElementById('view3d-link').href") == url
             assert page.evaluate("document.getElementById('view3d-link').target") == "_blank"

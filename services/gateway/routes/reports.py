@@ -53,7 +53,7 @@ def daily_report(state: StateDep, day: DateParam = None, tz: TimezoneParam = "UT
         raise HTTPException(400, f"date: {day.isoformat()} is outside {FIRST_DAY} to {LAST_DAY}")
     report = build_daily_report(state.site, state.history, day, zone, tz)
     if fmt == "html":  # the gateway's policy, plus the report's own stylesheet
-        policy = content_security_policy("/api/reports/daily", None, style_hashes=[STYLE_HASH])
+        policy = content_security_policy("/api/reports/daily", style_hashes=[STYLE_HASH])
         return HTMLResponse(render_html(report, zone), headers={"Content-Security-Policy": policy})
     if fmt == "pdf":
         name = re.sub(r"[^A-Za-z0-9_.-]", "_", f"report-{state.site.site}-{report.date}")

@@ -9,6 +9,7 @@ from bevflow.schemas import EVENT_TYPES, SCHEMA_VERSION
 from bevflow.site import Site
 
 from bevflow_services.gateway.params import SiteDep
+from bevflow_services.gateway.routes.view3d import PATH as VIEW3D_PATH
 from bevflow_services.redact import redact
 
 router = APIRouter(prefix="/api", tags=["site"])
@@ -17,7 +18,7 @@ router = APIRouter(prefix="/api", tags=["site"])
 class ClientConfig(BaseModel):
     site: str
     schema_version: int
-    view3d_url: str | None = Field(description="the 3D view (viser), on the host this request reached; null if off")
+    view3d_url: str | None = Field(description="the 3D view (viser), a path on this gateway; null if off")
     alert_types: list[str]
     websockets: dict[str, str] = Field(description="websocket paths by stream name")
     social_distance_m: float
@@ -38,14 +39,10 @@ def site(site: SiteDep) -> Site:
 
 @router.get("/config", response_model=ClientConfig, summary="Where the 3D view and the streams are")
 def config(request: Request, site: SiteDep) -> ClientConfig:
-    port = request.app.state.view3d_port
-    host = request.url.hostname or "127.0.0.1"
-    if ":" in host:  # an IPv6 literal needs brackets in a URL
-        host = f"[{host}]"
     return ClientConfig(
         site=site.site,
         schema_version=SCHEMA_VERSION,
-        view3d_url=None if port is None else f"{request.url.scheme}://{host}:{port}/",
+        view3d_url=None if request.app.state.view3d_port is None else f"{VIEW3D_PATH}/",
         alert_types=list(EVENT_TYPES),
         websockets={"alerts": "/ws/alerts", "tracks": "/ws/tracks"},
         social_distance_m=site.thresholds.social_distance_m,

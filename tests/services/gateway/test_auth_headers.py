@@ -32,9 +32,10 @@ def test_every_response_carries_the_security_headers(secured, path: str) -> None
     assert "strict-transport-security" not in response.headers  # plain HTTP here
 
 
-def test_the_3d_view_may_be_framed_from_its_own_port() -> None:
-    assert "frame-src 'self' http://gw.example:8001;" in content_security_policy("/", "http://gw.example:8001")
-    assert "frame-src 'self';" in content_security_policy("/", None)
+def test_the_3d_view_may_be_framed_by_the_gateways_own_pages_only() -> None:
+    assert "frame-src 'self';" in content_security_policy("/")  # the dashboard frames /view3d/, nothing else
+    view = content_security_policy("/view3d/")
+    assert "frame-ancestors 'self'" in view and "http" not in view  # framed by no other site
 
 
 def test_the_api_docs_get_a_policy_that_lets_swagger_load_from_the_gateway_only(secured) -> None:

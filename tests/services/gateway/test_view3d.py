@@ -126,9 +126,10 @@ def test_the_app_starts_the_view_with_its_lifespan_and_reports_its_url(site: Sit
     port = free_port()
     with TestClient(create_app(site, state, view3d_port=port)) as client:
         url = client.get("/api/config").json()["view3d_url"]
-        assert url == f"http://testserver:{port}/"
+        assert url == "/view3d/"  # through the gateway, behind its login
         status, page = _get(f"http://127.0.0.1:{port}/")
         assert status == 200 and "<html" in page.lower()
+        assert client.get(url).text == page
     assert client.app.state.view3d_port is None  # stopped with the app
 
 
