@@ -28,6 +28,7 @@ from bevflow.schemas import (
     Occupancy,
     OpenAlerts,
     Tracks,
+    zones_named,
 )
 from bevflow.site import Site
 
@@ -92,6 +93,7 @@ class GatewayState:
         self.site = site
         self.site_id = site_id or site.site
         self._site_names = {site.site, self.site_id}
+        self._zone_ids = frozenset(z.id for z in site.zones)
         self.history: HistoryStore = history if history is not None else InMemoryHistory()
         self.clock = clock
         self.window = window if window is not None else CaptureWindow.from_environment()
@@ -115,6 +117,9 @@ class GatewayState:
     # --- input ---------------------------------------------------------------------------------
     def apply(self, message: StateMessage) -> bool:
         """Take one bus message into account; False (and a log line) if it was ignored."""
+        if isinstance(message, (Tracks, Occupancy, EventBase)) and (unknown := zones_named(message) - self._zone_ids):
+            shown = ", ".join(repr(z[:40]) for z in sorted(unknown)[:3])
+            return self._ignore(f"{type(message).__name__} naming zones the site does not have: {shown}")
         if isinstance(message, Tracks):
             return self._apply_tracks(message)
         if isinstance(message, Occupancy):

@@ -75,14 +75,14 @@ def check_arguments(args: argparse.Namespace) -> None:
 def main(args: argparse.Namespace) -> int:
     check_arguments(args)
     policy = retention_policy(args)
-    _site, site_id = service_site(args)
+    site, site_id = service_site(args)
     keys = bus.Keys(site_id)
     try:
         db = HistoryDatabase.open(args.db)
         db.save_retention(policy)
     except StorageError as exc:
         raise UserError(str(exc)) from None
-    recorder = Recorder(db, track_period_s=args.track_period)
+    recorder = Recorder(db, track_period_s=args.track_period, zones=frozenset(z.id for z in site.zones))
     session = bus.open_session(bus.config_from_args(args))
     stats = bus.BusStats()
     subscriptions: list[bus.Subscription] = [

@@ -24,7 +24,7 @@ from collections.abc import Callable
 
 from bevflow.alert_lease import LEASE_S, NS, RateLimit
 from bevflow.capture_time import CaptureWindow
-from bevflow.schemas import Event, Occupancy, OpenAlerts, Tracks
+from bevflow.schemas import Event, Occupancy, OpenAlerts, Tracks, zones_named
 
 from bevflow_services.storage import Batch, HistoryDatabase, StorageUnavailable, TrackSampler
 
@@ -43,14 +43,19 @@ class Recorder:
             (``bevflow.capture_time``; the bus refuses times in the future); older ones are counted
             in ``counts["outside_window"]``.
 
+    With ``zones`` (the site's zone ids), a message naming another zone is not stored (counted in
+    ``counts["unknown_zones"]``): a forged id must not reach the history or its CSV exports.
+
     Alerts come at most at ``bevflow.alert_lease``'s rate (a flood is refused and counted in
     ``counts["events_refused"]``), and ``end_lapsed_alerts`` ends the open ones the tracker stopped
     renewing (``on_open_alerts``).
     """
 
     def __init__(self, db: HistoryDatabase, *, track_period_s: float = 1.0, max_pending_rows: int = 1_000_000,
-                 clock: Callable[[], int] = time.time_ns, window: CaptureWindow | None = None) -> None:
+                 clock: Callable[[], int] = time.time_ns, window: CaptureWindow | None = None,
+                 zones: frozenset[str] | None = None) -> None:
         self.db = db
+        self.zones = zones
         self.max_pending_rows = max_pending_rows
         self.clock = clock
         self.window = window if window is not None else CaptureWindow.from_environment()
@@ -65,6 +70,12 @@ class Recorder:
         self._sampler = TrackSampler(track_period_s, newest)
 
     # --- input, on Zenoh threads ----------------------------------------------------------------
+    def _known_zones(self, message: Tracks | Occupancy | Event) -> bool:
+        known = self.zones is None or zones_named(message) <= self.zones
+        if not known:
+            self.counts["unknown_zones"] += 1
+        return known
+
     def _live(self, time_ns: int) -> bool:
         live = not self.window.too_old(time_ns, self.clock())
         if not live:
@@ -73,18 +84,20 @@ class Recorder:
 
     def on_occupancy(self, occupancy: Occupancy) -> None:
         with self._lock:
-            if self._live(occupancy.time_ns):
+            if self._known_zones(occupancy) and self._live(occupancy.time_ns):
                 self._pending.add_occupancy(occupancy)
                 self.counts["occupancy"] += 1
 
     def on_tracks(self, tracks: Tracks) -> None:
         with self._lock:
-            if self._live(tracks.time_ns) and self._sampler.keep(tracks.time_ns):
+            if self._known_zones(tracks) and self._live(tracks.time_ns) and self._sampler.keep(tracks.time_ns):
                 self._pending.add_track_sample(tracks)
                 self.counts["track_samples"] += 1
 
     def on_event(self, event: Event) -> None:
         with self._lock:
+            if not self._known_zones(event):
+                return
             if not self._alert_rate.allow(self.clock()):
                 self.counts["events_refused"] += 1
                 return

@@ -379,6 +379,21 @@ class OpenAlerts(Message):
     ids: list[str] = Field(default_factory=list)
 
 
+def zones_named(message: BaseModel) -> set[str]:
+    """The zone ids a tracker message names (its tracks', counts' or alert's), for a receiver to
+    check against its site: a forged id must not reach the history, the API or a CSV export.
+
+    >>> zones_named(Occupancy(site="s", time_ns=0, total=1, zones=[ZoneOccupancy(id="gate", count=1)]))
+    {'gate'}
+    """
+    if isinstance(message, Tracks):
+        return {zone for track in message.tracks for zone in track.zones}
+    if isinstance(message, Occupancy):
+        return {zone.id for zone in message.zones}
+    zone = getattr(message, "zone", None)
+    return {zone} if isinstance(zone, str) else set()
+
+
 # --- to websocket and REST clients ---------------------------------------------------------------
 def iso_utc(time_ns: int) -> str:
     """``time_ns`` (nanoseconds since the Unix epoch) as ISO-8601 UTC with milliseconds and a ``Z``."""

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import csv
 import io
+import re
+import unicodedata
 from collections.abc import Iterable, Sequence
 from typing import Annotated, Any, Literal
 
@@ -50,24 +52,29 @@ CSV_RESPONSE: dict[int | str, dict[str, Any]] = {
 
 
 # --- CSV -----------------------------------------------------------------------------------------
+# What a spreadsheet may take as the start of a formula ('|' starts a DDE command in some), and
+# the control characters that can hide one or break a row. Alert ids come from the bus as any text.
+FORMULA_LEADS = frozenset("=+-@|\t\r\n")
+PLAIN_NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")
+
+
 def _cell(value: object) -> object:
-    """A CSV cell; text that a spreadsheet would run as a formula is quoted with a leading '."""
-    if isinstance(value, str) and value[:1] in ("=", "+", "@", "-") and not _is_number(value):
-        return "'" + value
-    return "" if value is None else value
-
-
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
+    """A CSV cell. Text that a spreadsheet would run as a formula gets a leading ', and control
+    characters become U+FFFD; numbers stay as they are (the writer quotes every text cell)."""
+    if value is None:
+        return ""
+    if not isinstance(value, str):
+        return value
+    text = "".join("\ufffd" if unicodedata.category(c) == "Cc" else c for c in value)
+    if value[:1] in FORMULA_LEADS and not PLAIN_NUMBER.fullmatch(value):
+        return "'" + text
+    return text
 
 
 def csv_response(name: str, header: Sequence[str], rows: Iterable[Sequence[object]], total: int) -> Response:
     out = io.StringIO()
-    writer = csv.writer(out, lineterminator="\n")
+    # Every text cell quoted: a CR inside one is never taken for the end of a row.
+    writer = csv.writer(out, lineterminator="\n", quoting=csv.QUOTE_NONNUMERIC)
     writer.writerow(header)
     writer.writerows([_cell(v) for v in row] for row in rows)
     return Response(out.getvalue(), media_type="text/csv; charset=utf-8",

@@ -3,7 +3,7 @@ from __future__ import annotations
 import pytest
 
 from bevflow.alert_lease import BURST, LEASE_S
-from bevflow.schemas import CameraHealthEvent, Detections2D, FrameHeader, OpenAlerts, TrackState, Tracks
+from bevflow.schemas import CameraHealthEvent, Detections2D, FrameHeader, OpenAlerts, TrackState, Tracks, ZoneOccupancy
 
 from bevflow_services.gateway.history import EventQuery
 from bevflow_services.gateway.state import GatewayState
@@ -35,6 +35,20 @@ def test_messages_for_another_site_or_camera_are_ignored_and_counted(state: Gate
     assert state.apply(message) is False
     assert state.ignored == 1
     assert state.tracks is None and state.occupancy is None and state.active_alerts() == []
+
+
+@pytest.mark.parametrize(
+    "message",
+    [
+        tracks(T0, {1: (0.0, 0.0)}, zones={1: ["gate", "\tforged"]}),
+        occupancy(T0, 1).model_copy(update={"zones": [ZoneOccupancy(id="=cmd|' /C calc'!A0", count=1)]}),
+        violation("v1", T0).model_copy(update={"zone": "nowhere"}),
+    ],
+    ids=["tracks", "occupancy", "alert"],
+)
+def test_messages_naming_a_zone_the_site_does_not_have_are_ignored(state: GatewayState, message) -> None:
+    assert state.apply(message) is False and state.ignored == 1
+    assert state.tracks is None and state.occupancy is None and state.history.events(EventQuery(), 10) == ([], 0)
 
 
 def test_tracks_older_than_the_latest_are_ignored(state: GatewayState) -> None:

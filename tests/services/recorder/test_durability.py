@@ -59,11 +59,11 @@ class Stream:
         k = len(self.ticks)
         t = self.t0_ns + k * S
         self.occupancy.put(Occupancy(site=self.keys.site, time_ns=t, total=k % 50,
-                                     zones=[ZoneOccupancy(id="gate", count=k % 7)]))
+                                     zones=[ZoneOccupancy(id="entrance", count=k % 7)]))
         self.tracks.put(Tracks(site=self.keys.site, time_ns=t, tracks=[TrackState(id=1, xy=(k * 0.1, 0.0))]))
         self.ticks.append((t, time.time()))
         if k % 4 == 0:  # an alert starts every fourth tick and ends six ticks later
-            kind = DistanceViolation(id=f"v{k}", start_ns=t, zone="gate", tracks=[1, 2], min_distance_m=1.0, limit_m=2.0) \
+            kind = DistanceViolation(id=f"v{k}", start_ns=t, zone="entrance", tracks=[1, 2], min_distance_m=1.0, limit_m=2.0) \
                 if k % 8 == 0 else OverCapacity(id=f"c{k}", start_ns=t, capacity=10, peak=12)
             self._alert(kind)
             self.open_events.append(kind)

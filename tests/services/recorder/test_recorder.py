@@ -147,3 +147,11 @@ def test_a_flood_of_alerts_is_refused_beyond_the_rate_and_what_got_in_ends_by_it
     clock[0] += 2 * S
     assert recorder.end_lapsed_alerts() == stored - 1
     assert [e.id for e in db.events(EventFilter(active=True), 10)[0]] == ["real"]
+
+
+def test_messages_naming_a_zone_the_site_does_not_have_are_not_stored(db: HistoryDatabase) -> None:
+    recorder = Recorder(db, clock=now, zones=frozenset({"gate", "shop"}))
+    recorder.on_tracks(tracks(T0, {1: (0.0, 0.0)}, zones={1: ["\rforged"]}))
+    recorder.on_occupancy(occupancy(T0, 1).model_copy(update={"zones": []}))  # the site total alone is fine
+    recorder.on_event(violation("v1", T0).model_copy(update={"zone": "|forged"}))
+    assert recorder.counts["unknown_zones"] == 2 and recorder.pending() == 1

@@ -20,6 +20,7 @@ from bevflow.site import Site
 from bevflow_services.gateway import GatewayState, create_app
 from bevflow_services.gateway.history import HistoryStore, InMemoryHistory
 from bevflow_services.gateway.history_db import DatabaseHistory
+from bevflow_services.gateway.routes.history import _cell
 from bevflow_services.recorder.recorder import Recorder
 from bevflow_services.storage import Batch, HistoryDatabase
 from tests.services.gateway.feed import S, T0, FakeClock, occupancy, over_capacity, tracks, violation
@@ -168,6 +169,36 @@ def test_alerts_in_a_range_with_their_durations(history: History, query: str, id
     assert [e["id"] for e in body["items"]] == ids
     expected = {"v1": 4.0, "c1": 75.0, "v2": None, "v3": None}
     assert {e["id"]: e["duration_s"] for e in body["items"]} == {i: expected[i] for i in ids}
+
+
+@pytest.mark.parametrize(
+    ("value", "cell"),
+    [
+        ("=1+2", "'=1+2"),
+        ("+cmd", "'+cmd"),
+        ("-2+3", "'-2+3"),
+        ("@SUM(A1)", "'@SUM(A1)"),
+        ("|calc", "'|calc"),
+        ("\t=1", "'\ufffd=1"),
+        ("\r=1", "'\ufffd=1"),
+        ("a\rb\x00c\x1b", "a\ufffdb\ufffdc\ufffd"),
+        ("-1.5", "-1.5"),  # a number stays one
+        ("+2e3", "+2e3"),
+        ("v1", "v1"),
+        (3, 3),
+        (None, ""),
+    ],
+)
+def test_csv_cells_are_never_formulas_nor_hide_control_characters(value: object, cell: object) -> None:
+    assert _cell(value) == cell
+
+
+def test_an_alert_id_from_the_bus_cannot_break_a_csv_row(history: History) -> None:
+    forged = ["\r=cmd|' /C calc'!A0", "|calc", "\tx"]
+    history.feed(*[violation(name, T0) for name in forged])
+    response = history.client.get("/api/history/events?format=csv&types=distance_violation")
+    assert "\r" not in response.text and "\t" not in response.text
+    assert {r["id"] for r in rows(response)} == {"'\ufffd=cmd|' /C calc'!A0", "'\ufffdx", "'|calc"}
 
 
 def test_alerts_as_csv(history: History) -> None:
