@@ -45,10 +45,11 @@ LOCAL_USER = "local"  # who every request is when access control is off
 NS = 1_000_000_000
 # How long the first-run setup link works: it is written to the log, which others may read later.
 SETUP_LINK_S = 3600.0
-# Passwords hashed or checked at once. Each argon2 call takes 64 MiB and a core for a fraction of
-# a second; beyond this many a login is refused at once (503) rather than queued, so a flood of
-# logins cannot take every worker thread and gigabytes of memory from the people using the site.
-HASHING_SLOTS = 2
+# Passwords hashed or checked at once. Each argon2 call takes 64 MiB and several cores for a
+# fraction of a second; beyond this many a login is refused at once (503) rather than queued, so a
+# flood of logins cannot take every worker thread, the CPU and gigabytes of memory from the people
+# using the site. One: on two cores, two at once let a viewer's request wait a second under a flood.
+HASHING_SLOTS = 1
 
 
 def role_rank(role: str) -> int:
