@@ -11,6 +11,7 @@ Units are metres and degrees; the world frame has X, Y on the floor and Z up.
 from __future__ import annotations
 
 import json
+import logging
 import math
 from functools import cached_property
 from pathlib import Path
@@ -22,6 +23,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationIn
 
 from bevflow.camera import Camera, make_camera, rotation_from_ypr
 from bevflow.detect.providers import DEFAULT_PROVIDERS, check_providers
+
+log = logging.getLogger(__name__)
 
 PositiveFloat = Annotated[float, Field(gt=0)]
 
@@ -61,6 +64,17 @@ class Extrinsics(_Strict):
 
 MONITORED_EDGE_MARGIN_M = 0.5
 
+# What a site file may say, checked when it is read. Beyond the hard limits the value cannot be
+# right and the site is refused, naming the field; between them and the usual range it is only
+# odd, and loading logs a warning (``odd_values``).
+# A ceiling fisheye looks down on people: at 2 m a 1.7 m person's head is at the lens already. A
+# pinhole camera may look from a wall (as WILDTRACK's, at about 1.5 to 2 m), but not from the floor.
+CAMERA_HEIGHT_LIMITS_M = {"fisheye": (2.0, 100.0), "pinhole": (0.5, 100.0)}
+CAMERA_HEIGHT_USUAL_M = {"fisheye": (2.5, 15.0), "pinhole": (1.5, 15.0)}  # the paper's halls: 3.3 to 8.1 m
+# The paper claims people are placed well up to 10 m from below a camera (``bevflow.planning``).
+MONITORED_RADIUS_LIMIT_M = 30.0
+MONITORED_RADIUS_USUAL_M = 10.0
+
 
 class CameraConfig(_Strict):
     id: Annotated[str, Field(min_length=1, pattern=r"^[A-Za-z0-9_.-]+$")]
@@ -92,6 +106,20 @@ class CameraConfig(_Strict):
             raise ValueError("no 'pose' (position and angles) or 'extrinsics' (rvec, tvec); give one of them")
         if self.pose is not None and self.extrinsics is not None:
             raise ValueError("both 'pose' and 'extrinsics' are given; keep only one of them")
+        return self
+
+    @model_validator(mode="after")
+    def _possible_mounting(self) -> CameraConfig:
+        field = "pose.position" if self.pose is not None else "extrinsics"
+        low, high = CAMERA_HEIGHT_LIMITS_M[self.model]
+        height = self.height_m
+        if not low <= height <= high:
+            raise ValueError(f"{field}: the camera is {height:.2f} m above the floor; a {self.model} camera must hang "
+                             f"between {low:g} and {high:g} m (Z up, the floor at 0)")
+        radius = self.monitored_radius_m
+        if radius is not None and radius > MONITORED_RADIUS_LIMIT_M:
+            raise ValueError(f"monitored_radius_m: {radius:g} m cannot be watched from one camera "
+                             f"(at most {MONITORED_RADIUS_LIMIT_M:g} m; about {MONITORED_RADIUS_USUAL_M:g} m is the farthest that works)")
         return self
 
     def build(self) -> Camera:
@@ -321,6 +349,14 @@ class Site(_Strict):
             raise ValueError(f"ids must be unique; {'; '.join(repeated)}")
         return items
 
+    @model_validator(mode="after")
+    def _zones_on_the_floor(self) -> Site:
+        for k, zone in enumerate(self.zones):
+            if self.floor is not None and _outside(zone.polygon, self.floor) == "entirely":
+                raise ValueError(f"zones[{k}] (id {zone.id!r}).polygon: the zone lies entirely outside the floor "
+                                 f"{list(self.floor)}")
+        return self
+
     @field_validator("floor")
     @classmethod
     def _floor_has_area(
@@ -366,6 +402,37 @@ class Site(_Strict):
 _CACHED = ("built_cameras", "camera_ids")
 
 
+def _outside(polygon: list[tuple[float, float]], floor: tuple[float, float, float, float]) -> str:
+    """Whether a polygon lies "entirely", "partly" or "not" outside a floor rectangle (by its
+    corners and bounding box: a zone is a few corners drawn by hand)."""
+    xs, ys = [p[0] for p in polygon], [p[1] for p in polygon]
+    x0, y0, x1, y1 = floor
+    if max(xs) <= x0 or min(xs) >= x1 or max(ys) <= y0 or min(ys) >= y1:
+        return "entirely"
+    inside = all(x0 <= x <= x1 and y0 <= y <= y1 for x, y in polygon)
+    return "not" if inside else "partly"
+
+
+def odd_values(site: Site) -> list[str]:
+    """What is possible but unusual in a site, one line each naming the field: worth a look
+    before the site runs (loading logs them as warnings)."""
+    odd = []
+    for k, camera in enumerate(site.cameras):
+        where = f"cameras[{k}] (id {camera.id!r})"
+        low, high = CAMERA_HEIGHT_USUAL_M[camera.model]
+        if not low <= camera.height_m <= high:
+            odd.append(f"{where}: hangs {camera.height_m:.2f} m above the floor; {camera.model} cameras usually hang "
+                       f"{low:g} to {high:g} m")
+        radius = camera.monitored_radius_m
+        if radius is not None and radius > min(MONITORED_RADIUS_USUAL_M, 4 * camera.height_m):
+            odd.append(f"{where}.monitored_radius_m: {radius:g} m is more than a camera at {camera.height_m:.2f} m "
+                       f"usually places people well (about {min(MONITORED_RADIUS_USUAL_M, 4 * camera.height_m):.1f} m)")
+    for k, zone in enumerate(site.zones):
+        if site.floor is not None and _outside(zone.polygon, site.floor) == "partly":
+            odd.append(f"zones[{k}] (id {zone.id!r}).polygon: part of the zone lies outside the floor {list(site.floor)}")
+    return odd
+
+
 class SiteError(ValueError):
     """A site file that cannot be used. ``str()`` is the message to show the user."""
 
@@ -409,9 +476,12 @@ def parse_site(text: str, source: str = "<site>", fmt: Literal["yaml", "json"] =
     if not isinstance(raw, dict):
         raise SiteError(f"{source}: expected a mapping with 'cameras' at the top, got a {type(raw).__name__}")
     try:
-        return Site.model_validate(raw)
+        site = Site.model_validate(raw)
     except ValidationError as exc:
         raise SiteError("\n".join(_describe(source, raw, err) for err in exc.errors())) from None
+    for line in odd_values(site):
+        log.warning("%s: %s", source, line)
+    return site
 
 
 def _syntax_error_place(exc: json.JSONDecodeError | yaml.YAMLError) -> str:

@@ -185,6 +185,17 @@ INVALID = [
         id="zero-misses",
     ),
     pytest.param(_set("floor", [0, 0, -5, 10]), ["floor:", "xmax > xmin"], id="floor-inverted"),
+    # Values that cannot be right (issue 21): a camera under the floor or at head height, a radius
+    # no camera watches, a zone off the floor.
+    pytest.param(_set("cameras.0.pose.position", [5, 5, -5.5]),
+                 ["cameras[0] (id 'cam-a')", "pose.position", "-5.50 m above the floor"], id="camera-under-the-floor"),
+    pytest.param(_set("cameras.1.pose.position", [5, 5, 1.0]),
+                 ["cameras[1] (id 'cam-b')", "pose.position", "1.00 m above the floor", "between 2 and 100 m"],
+                 id="camera-at-head-height"),
+    pytest.param(_set("cameras.0.monitored_radius_m", 1e9),
+                 ["cameras[0] (id 'cam-a')", "monitored_radius_m: 1e+09 m"], id="radius-1e9"),
+    pytest.param(_set("zones.1.polygon", [[50, 50], [60, 50], [60, 60]]),
+                 ["zones[1] (id 'bar').polygon", "entirely outside the floor"], id="zone-off-the-floor"),
 ]
 
 
@@ -443,3 +454,25 @@ def test_site_argument_is_a_file_or_a_shipped_name(tmp_path, monkeypatch) -> Non
     assert by_name == site_module.load_site_or_builtin(str(tmp_path / "hall-b.yaml"))
     with pytest.raises(site_module.SiteError, match="built-in: hall-b"):
         site_module.load_site_or_builtin("hall-c")
+
+
+@pytest.mark.parametrize(
+    ("edit", "warning"),
+    [
+        (_set("cameras.0.pose.position", [5, 5, 2.2]), "cameras[0] (id 'cam-a'): hangs 2.20 m above the floor"),
+        (_set("cameras.1.pose.position", [15, 5, 25.0]), "cameras[1] (id 'cam-b'): hangs 25.00 m"),
+        (_set("cameras.0.monitored_radius_m", 15.0), "cameras[0] (id 'cam-a').monitored_radius_m: 15 m"),
+        (_set("zones.0.polygon", [[-2, 0], [4, 0], [4, 4]]), "zones[0] (id 'entrance').polygon: part of the zone"),
+    ],
+)
+def test_odd_but_possible_values_load_with_a_warning(edit, warning: str, caplog: pytest.LogCaptureFixture) -> None:
+    with caplog.at_level("WARNING", logger="bevflow.site"):
+        parse_site(_site_text(edit), source="hall.yaml")
+    assert [m for m in caplog.messages if m.startswith("hall.yaml: ") and warning in m], caplog.messages
+
+
+def test_a_usual_site_loads_without_warnings(caplog: pytest.LogCaptureFixture) -> None:
+    with caplog.at_level("WARNING", logger="bevflow.site"):
+        parse_site(_site_text(lambda raw: None))
+        load_site(EXAMPLE_HALL)
+    assert caplog.messages == []
