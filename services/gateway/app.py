@@ -42,6 +42,7 @@ from bevflow_services.gateway.routes import site as site_routes
 from bevflow_services.gateway.routes import users as users_routes
 from bevflow_services.gateway.routes import view3d as view3d_routes
 from bevflow_services.gateway.state import GatewayState
+from bevflow_services.storage import StorageError
 
 log = logging.getLogger(__name__)
 
@@ -145,6 +146,7 @@ def create_app(
         app.include_router(module.router)
     app.add_exception_handler(RequestValidationError, _validation_error)
     app.add_exception_handler(HashingBusy, _hashing_busy)
+    app.add_exception_handler(StorageError, _storage_error)
     app.add_middleware(BodyLimit)
     app.add_middleware(CrossSiteGuard, access=access)
     add_security_middleware(app, access.cors_origins, hsts=access.secure_cookies)
@@ -168,6 +170,13 @@ async def _validation_error(request: Request, exc: Exception) -> JSONResponse:
 async def _hashing_busy(request: Request, exc: Exception) -> JSONResponse:
     """503 at once when every password-hashing slot is taken (a login flood), instead of queueing."""
     return JSONResponse(status_code=503, content={"detail": str(exc)}, headers={"Retry-After": "1"})
+
+
+async def _storage_error(request: Request, exc: Exception) -> JSONResponse:
+    """The history database failed (down, or a damaged file): 503 with its one line, and the
+    live data, served from memory, goes on."""
+    log.error("%s %s: %s", request.method, request.url.path, exc)
+    return JSONResponse(status_code=503, content={"detail": str(exc)})
 
 
 def _openapi(app: FastAPI) -> dict[str, Any]:

@@ -9,6 +9,9 @@ recorder (and, on SQLite, a power cut); a hard kill loses at most the occupancy 
 the last interval. No alert is lost or stored twice: alerts are fetched again from the tracker's
 cache when the recorder restarts, and stored once per alert id, updated in place when it ends.
 Downsampling and retention run in the same loop, a bounded slice at a time.
+
+A database that does not answer is retried; one that is damaged (a corrupt SQLite file) leaves the
+recorder nothing to do: it stops with one line saying so and what to do (exit status 2).
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ from bevflow_services import bus
 from bevflow_services.cli import UserError
 from bevflow_services.cli.serve import service_site, stop_on_signals
 from bevflow_services.recorder.recorder import Recorder
-from bevflow_services.storage import HistoryDatabase, RetentionPolicy, StorageError, StorageUnavailable
+from bevflow_services.storage import HistoryDatabase, RetentionPolicy, StorageDamaged, StorageError, StorageUnavailable
 
 log = logging.getLogger(__name__)
 SERVICE = "recorder"
@@ -96,6 +99,8 @@ def main(args: argparse.Namespace) -> int:
     try:
         with stop_on_signals() as stop:
             run(recorder, policy, stop, args.commit_interval, args.retention_every)
+    except StorageDamaged as exc:
+        raise UserError(str(exc)) from None
     finally:
         token.undeclare()
         for subscription in subscriptions:
@@ -103,7 +108,7 @@ def main(args: argparse.Namespace) -> int:
         session.close()
         try:
             recorder.flush()
-        except StorageUnavailable as exc:
+        except StorageError as exc:
             log.error("could not write the last %d rows: %s", recorder.pending(), exc)
         db.close()
         log.info("recorder stopped: %s; bus %s", dict(recorder.counts), stats.snapshot())

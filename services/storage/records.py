@@ -18,6 +18,10 @@ class StorageError(Exception):
     line, fit to show a user as is."""
 
 
+class StorageDamaged(StorageError):
+    """The database file is corrupt: retrying will not help, restoring a backup will."""
+
+
 class StorageUnavailable(StorageError):
     """The database did not answer (locked, restarting, unreachable). Retrying later may work;
     nothing of the failed call was written."""

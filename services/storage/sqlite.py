@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from bevflow_services.storage.backend import Dialect, Row
-from bevflow_services.storage.records import StorageError, StorageUnavailable
+from bevflow_services.storage.records import StorageDamaged, StorageError, StorageUnavailable
 
 DIALECT = Dialect(name="sqlite", id_pk="INTEGER PRIMARY KEY AUTOINCREMENT", key_text="TEXT", migration_lock=None)
 
@@ -50,6 +50,27 @@ def _unavailable(exc: sqlite3.Error) -> bool:
         word in str(exc) for word in ("locked", "busy", "disk I/O", "unable to open"))
 
 
+def _damaged(exc: sqlite3.Error) -> bool:
+    # SQLITE_CORRUPT and SQLITE_NOTADB: pages overwritten or the file is something else.
+    return isinstance(exc, sqlite3.DatabaseError) and any(
+        words in str(exc) for words in ("malformed", "not a database", "corrupt"))
+
+
+def _is_sqlite(path: Path) -> bool:
+    """Whether a file starts as SQLite files do: a damaged database, not some other file."""
+    with path.open("rb") as file:
+        return file.read(16) == b"SQLite format 3\x00"
+
+
+def _one_line(url: str, exc: sqlite3.Error) -> StorageError:
+    """What a failed call tells the user: damaged, unavailable for now, or another error."""
+    if _damaged(exc):
+        path = sqlite_path(url)
+        return StorageDamaged(f"database {path} is damaged ({exc}): move it aside and restore the latest backup "
+                              f"(sqlite3 {path} .recover may save what it still holds)")
+    return (StorageUnavailable if _unavailable(exc) else StorageError)(f"database {url}: {exc}")
+
+
 class SqliteBackend:
     """A SQLite database file, created if missing (its folder must exist)."""
 
@@ -66,6 +87,8 @@ class SqliteBackend:
             self._conn.execute("PRAGMA synchronous=FULL")
             self._conn.execute(f"PRAGMA busy_timeout={int(busy_timeout_s * 1000)}")
         except sqlite3.Error as exc:
+            if _damaged(exc) and Path(path).is_file() and _is_sqlite(Path(path)):
+                raise _one_line(url, exc) from None
             raise StorageError(f"database {path}: cannot open it as SQLite ({exc})") from None
         self._lock = threading.RLock()
 
@@ -77,24 +100,30 @@ class SqliteBackend:
                 # one failing half-way through with SQLITE_BUSY.
                 self._conn.execute("BEGIN IMMEDIATE")
             except sqlite3.Error as exc:
-                raise (StorageUnavailable if _unavailable(exc) else StorageError)(f"database {self.url}: {exc}") from None
+                raise _one_line(self.url, exc) from None
             try:
                 yield _Cursor(self._conn)
                 self._conn.execute("COMMIT")
             except BaseException as exc:
-                if self._conn.in_transaction:
-                    self._conn.execute("ROLLBACK")
-                if isinstance(exc, sqlite3.Error) and _unavailable(exc):
-                    raise StorageUnavailable(f"database {self.url}: {exc}") from None
+                self._roll_back()
+                if isinstance(exc, sqlite3.Error) and (_unavailable(exc) or _damaged(exc)):
+                    raise _one_line(self.url, exc) from None
                 raise
+
+    def _roll_back(self) -> None:
+        if self._conn.in_transaction:
+            try:
+                self._conn.execute("ROLLBACK")
+            except sqlite3.Error:  # a damaged file may refuse even that; the error that led here says why
+                pass
 
     def query(self, sql: str, params: Sequence[Any] = ()) -> list[Row]:
         with self._lock:
             try:
                 return _Cursor(self._conn).execute(sql, params)
             except sqlite3.Error as exc:
-                if _unavailable(exc):
-                    raise StorageUnavailable(f"database {self.url}: {exc}") from None
+                if _unavailable(exc) or _damaged(exc):
+                    raise _one_line(self.url, exc) from None
                 raise
 
     def close(self) -> None:

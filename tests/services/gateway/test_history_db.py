@@ -7,18 +7,22 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from fastapi.testclient import TestClient
 
 from bevflow.alert_lease import LEASE_S
 from bevflow.capture_time import CaptureWindow
 from bevflow.schemas import TrackState, Tracks
+from bevflow.site import parse_site
 
 from bevflow_services.cli import UserError
+from bevflow_services.gateway import GatewayState, create_app
 from bevflow_services.gateway.history import EventQuery, InMemoryHistory
 from bevflow_services.gateway.history_db import DatabaseHistory, history_store
 from bevflow_services.gateway.main import add_arguments
 from bevflow_services.recorder.recorder import Recorder
 from bevflow_services.storage import HistoryDatabase, RetentionPolicy
-from tests.services.gateway.feed import S, T0, occupancy, violation
+from tests.services.gateway.feed import S, SITE_YAML, T0, FakeClock, occupancy, tracks, violation
+from tests.services.storage.databases import damaged_sqlite_history
 from tests.services.storage.databases import database_url  # noqa: F401  (a fixture)
 
 MS = 1_000_000
@@ -125,3 +129,16 @@ def test_a_restarted_gateway_does_not_serve_forged_alerts_as_active_for_ever(db:
     restarted = DatabaseHistory(db, clock=lambda: T0 + int(LEASE_S * S) + S)  # no renewal came
     assert restarted.events(EventQuery(active=True), 10) == ([], 0)
     assert restarted.events(EventQuery(active=False), 10)[1] == 500
+
+
+def test_a_damaged_database_answers_503_in_one_line_and_the_live_data_goes_on(tmp_path: Path) -> None:
+    site = parse_site(SITE_YAML)
+    path = damaged_sqlite_history(tmp_path / "history.db")
+    state = GatewayState(site, DatabaseHistory(HistoryDatabase.open(str(path))), clock=FakeClock())
+    state.apply(tracks(T0, {7: (1.0, 1.0)}))
+    with TestClient(create_app(site, state), raise_server_exceptions=False) as client:
+        for url in ("/api/tracks/5", "/api/history/occupancy?since=1700000000&step_s=60"):
+            response = client.get(url)
+            assert response.status_code == 503, (url, response.text)
+            assert "is damaged" in response.json()["detail"] and "\n" not in response.json()["detail"]
+        assert [t["id"] for t in client.get("/api/tracks").json()["items"]] == [7]

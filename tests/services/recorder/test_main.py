@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
@@ -11,9 +13,11 @@ import pytest
 from bevflow.capture_time import CaptureWindow
 
 from bevflow_services.cli import UserError
+from bevflow_services.launcher import free_port
 from bevflow_services.cli.serve import run_service
 from bevflow_services.recorder.main import run
 from bevflow_services.storage import RetentionPolicy, RetentionResult, StorageUnavailable
+from tests.services.storage.databases import damaged_sqlite_history
 
 
 @pytest.mark.parametrize(
@@ -79,3 +83,15 @@ def test_the_loop_flushes_and_works_off_retention_between_flushes(retention_done
     assert loop.flushes == 6
     assert loop.retentions == retentions
     assert loop.latest_ns == [5 * 10**9] * retentions  # rows beyond the clock's future bound are purged
+
+
+def test_a_damaged_database_stops_the_recorder_with_one_line(tmp_path: Path) -> None:
+    """A SQLite file corrupted in the middle made the recorder exit with a 29-line traceback."""
+    path = damaged_sqlite_history(tmp_path / "history.db")
+    argv = [sys.executable, "-m", "bevflow_services.recorder.main", "--site", "example-hall", "--db", str(path),
+            "--listen", f"tcp/127.0.0.1:{free_port()}"]
+    done = subprocess.run(argv, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2, done.stderr
+    assert "Traceback" not in done.stderr
+    (line,) = [x for x in done.stderr.splitlines() if x.startswith("bevflow serve recorder:")]
+    assert f"database {path} is damaged" in line and "restore the latest backup" in line

@@ -111,3 +111,31 @@ def new_database_url(kind: str, folder: Path) -> str:
 def database_url(request: pytest.FixtureRequest, tmp_path: Path) -> str:
     """An empty database of each backend in turn: a SQLite file path or a postgresql:// URL."""
     return new_database_url(request.param, tmp_path)
+
+
+def damaged_sqlite_history(path: Path, rows: int = 200, *, whole: bool = False) -> Path:
+    """A SQLite history with ``rows`` seconds of occupancy and positions whose data pages are
+    overwritten while its table of tables is intact, so it opens and fails when used: a file
+    corrupted in the middle (``whole``: every page after the first, so it fails when opened)."""
+    import sqlite3
+
+    from bevflow_services.storage import Batch, HistoryDatabase
+    from tests.services.gateway.feed import S, T0, occupancy, tracks
+
+    with HistoryDatabase.open(str(path)) as db:
+        for k in range(rows):
+            batch = Batch()
+            batch.add_occupancy(occupancy(T0 + k * S, k % 5))
+            batch.add_track_sample(tracks(T0 + k * S, {i: (float(i), 0.0) for i in range(20)}))
+            db.write(batch)
+        db.backend.query("PRAGMA wal_checkpoint(TRUNCATE)")
+    with sqlite3.connect(path) as conn:
+        size = conn.execute("PRAGMA page_size").fetchone()[0]
+        pages = [n for (n,) in conn.execute(
+            "SELECT pageno FROM dbstat WHERE name IN ('occupancy', 'track_points') AND pagetype = 'leaf'")]
+    data = bytearray(path.read_bytes())
+    garbage = bytes((k * 7919 + 13) % 256 for k in range(size))
+    for n in range(2, len(data) // size + 1) if whole else pages:
+        data[(n - 1) * size:n * size] = garbage
+    path.write_bytes(bytes(data))
+    return path

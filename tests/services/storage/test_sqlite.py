@@ -5,8 +5,9 @@ from pathlib import Path
 
 import pytest
 
-from bevflow_services.storage import HistoryDatabase, StorageError, StorageUnavailable
+from bevflow_services.storage import HistoryDatabase, StorageDamaged, StorageError, StorageUnavailable
 from bevflow_services.storage.sqlite import SqliteBackend, sqlite_path
+from tests.services.storage.databases import damaged_sqlite_history
 
 
 @pytest.mark.parametrize(
@@ -58,3 +59,22 @@ def test_a_writer_that_cannot_get_the_lock_in_time_is_told_to_retry(tmp_path: Pa
     finally:
         backend.close()
         holder.close()
+
+
+@pytest.mark.parametrize(
+    ("whole", "use"),
+    [
+        (False, lambda db: db.trajectory(5)),
+        (False, lambda db: db.nearby_positions(5, 2.0)),
+        (False, lambda db: db.occupancy()),
+        (True, lambda db: db.row_counts()),  # refused when opened
+    ],
+    ids=["trajectory", "contacts", "occupancy", "at-open"],
+)
+def test_a_file_damaged_in_the_middle_is_one_clear_error(tmp_path: Path, whole: bool, use) -> None:
+    path = damaged_sqlite_history(tmp_path / "h.db", whole=whole)
+    with pytest.raises(StorageDamaged) as caught:
+        with HistoryDatabase.open(str(path)) as db:
+            use(db)
+    message = str(caught.value)
+    assert "\n" not in message and f"database {path} is damaged" in message and "restore the latest backup" in message
