@@ -25,6 +25,7 @@ import bevflow_dashboard
 from bevflow.schemas import AlertMessage, Tracks
 from bevflow.site import Site
 
+from bevflow_services.gateway.alert_replay import RecentAlerts
 from bevflow_services.gateway.api_docs import add_api_docs
 from bevflow_services.gateway.auth import Access, HashingBusy, require_role
 from bevflow_services.gateway.body_limit import BodyLimit
@@ -39,8 +40,8 @@ from bevflow_services.gateway.routes import metrics as metrics_routes
 from bevflow_services.gateway.routes import probes
 from bevflow_services.gateway.routes import reports
 from bevflow_services.gateway.routes import site as site_routes
-from bevflow_services.gateway.routes import users as users_routes
 from bevflow_services.gateway.routes import view3d as view3d_routes
+from bevflow_services.gateway.routes import users as users_routes
 from bevflow_services.gateway.state import GatewayState
 from bevflow_services.storage import StorageError
 
@@ -57,6 +58,9 @@ WEBSOCKETS_DOC = {
                      "events that distance_incident groups)",
             "zones": "comma-separated zone ids to receive (default: all, including site-wide alerts)",
             "replay": "'active' to first receive the alerts already ongoing (default: 'none')",
+            "since": "the id of the last alert received: first receive, from the history and oldest first, every alert "
+                     "whose newest message came after it, each once in its newest state, then the live ones; 400 for "
+                     "an id the history does not hold; not with replay=active",
         },
         "message": {"$ref": "#/components/schemas/AlertMessage"},
     },
@@ -129,6 +133,8 @@ def create_app(
         redoc_url=None,
     )
     app.state.gateway = state
+    app.state.recent_alerts = RecentAlerts()
+    state.alerts.observe(app.state.recent_alerts.keep)  # for ?since= replays
     app.state.view3d_port = None
     app.state.history_s = getattr(state.history, "retention_ns", 3600 * 10**9) / 1e9
 

@@ -51,6 +51,7 @@ class Broadcaster(Generic[T]):
     def __init__(self, maxsize: int = 64) -> None:
         self.maxsize = maxsize
         self._subscribers: list[Subscription[T]] = []
+        self._observers: list[Callable[[T], object]] = []
         self._lock = threading.Lock()
 
     def __len__(self) -> int:
@@ -74,10 +75,20 @@ class Broadcaster(Generic[T]):
             with self._lock:
                 self._subscribers.remove(sub)
 
+    def observe(self, callback: Callable[[T], object]) -> None:
+        """Call ``callback(item)`` for every item from now on, in ``publish`` itself, before any
+        subscriber can see it (the gateway's own bookkeeping: recent alerts, metrics); it must be
+        quick and thread-safe. Observers are not subscribers: they are not counted in ``len``."""
+        with self._lock:
+            self._observers.append(callback)
+
     def publish(self, item: T) -> None:
-        """Hand ``item`` to every subscriber; never blocks."""
+        """Hand ``item`` to every observer, then to every subscriber; never blocks."""
         with self._lock:
             subscribers = list(self._subscribers)
+            observers = list(self._observers)
+        for observer in observers:
+            observer(item)
         try:
             current = asyncio.get_running_loop()
         except RuntimeError:

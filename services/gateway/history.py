@@ -77,6 +77,10 @@ class HistoryStore(Protocol):
         """Matching alerts newest first (by start), one page of them, and how many match in all."""
         ...
 
+    def event(self, event_id: str) -> Event | None:
+        """The newest state of one alert, None if it is not (or no longer) kept."""
+        ...
+
     def add_tracks(self, tracks: Tracks) -> None:
         """Record a tick's track positions (ticks must come in time order)."""
         ...
@@ -154,6 +158,11 @@ class InMemoryHistory:
                 if not (too_many or expired):
                     break
                 self._events.popitem(last=False)
+
+    def event(self, event_id: str) -> Event | None:
+        """The newest state of one alert, None if it is not (or no longer) kept."""
+        with self._lock:
+            return self._events.get(event_id)
 
     def events(self, query: EventQuery, limit: int, offset: int = 0) -> tuple[list[Event], int]:
         with self._lock:

@@ -92,6 +92,10 @@ class DatabaseHistory:
                              renewed_since_ns=self.clock() - int(LEASE_S * NS))
         return self.db.events(wanted, limit, offset)
 
+    def event(self, event_id: str) -> Event | None:
+        """The newest state of one alert, None if the database does not hold it."""
+        return self.db.event(event_id)
+
     def trajectory(self, track_id: int, since_ns: int | None = None, until_ns: int | None = None) -> Trajectory | None:
         path = self.db.trajectory(track_id, since_ns, self._until(until_ns))
         return None if path is None else Trajectory(track_id, path[0], path[1])

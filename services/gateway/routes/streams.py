@@ -6,8 +6,12 @@ it changes or ends (``active`` false, ``end`` set). ``types`` and ``zones`` are 
 filters (omit ``types`` to get every type but ``distance_violation``, the per-pair events that
 ``distance_incident`` groups; omit ``zones`` for every zone; an alert with zone null only passes
 when ``zones`` is omitted);
-``replay=active`` first sends the alerts already ongoing. ``/ws/tracks`` sends one ``Tracks`` JSON
-object per tick, starting with the latest one.
+``replay=active`` first sends the alerts already ongoing. ``since=ID`` (the id of the last alert a
+client received, when it reconnects) first sends, from the history, every alert whose newest
+message came after that alert's, oldest first, each once in its newest state, then goes on live
+without repeating them (``bevflow_services.gateway.alert_replay``); an id the history does not
+hold is refused with 400. ``/ws/tracks`` sends one ``Tracks`` JSON object per tick, starting with
+the latest one.
 
 Clients prove who they are as for REST (the dashboard's session cookie, or an API token in the
 ``Authorization`` header) or with ``?token=TOKEN``; without either the connection is refused with
@@ -29,15 +33,16 @@ from pydantic import BaseModel
 
 from bevflow.schemas import EVENT_TYPES, FEED_EVENT_TYPES, AlertMessage, Tracks
 
+from bevflow_services.gateway.alert_replay import ReplayError, missed_alerts, position
 from bevflow_services.gateway.auth import get_access
 from bevflow_services.gateway.fanout import Subscription, pump
 from bevflow_services.gateway.params import split_csv
+from bevflow_services.gateway.routes.users import audited_stream
 from bevflow_services.gateway.state import GatewayState
 
 router = APIRouter()
 REPLAY_CHOICES = ("none", "active")
 # What sending to a client that has just gone away raises, depending on the server.
-from bevflow_services.gateway.routes.users import audited_stream
 CLIENT_GONE = (WebSocketDisconnect, OSError, RuntimeError)
 # How often an open stream's credential is checked again: revoking it ends the stream within this.
 RECHECK_S = 0.5
@@ -58,15 +63,26 @@ class AlertFilter:
 
 def alert_filter(query: Any, state: GatewayState) -> tuple[AlertFilter, bool]:
     """The filter and the replay flag from the query string; HTTPException naming a bad parameter."""
-    unknown = sorted(set(query.keys()) - {"types", "zones", "replay", "token"})
+    unknown = sorted(set(query.keys()) - {"types", "zones", "replay", "since", "token"})
     if unknown:
-        raise HTTPException(400, f"unknown parameter(s) {', '.join(unknown)}; allowed: types, zones, replay")
+        raise HTTPException(400, f"unknown parameter(s) {', '.join(unknown)}; allowed: types, zones, replay, since")
     types = split_csv(query.get("types"), "types", EVENT_TYPES) or frozenset(FEED_EVENT_TYPES)
     zones = split_csv(query.get("zones"), "zones", tuple(z.id for z in state.site.zones))
     replay = query.get("replay", "none")
     if replay not in REPLAY_CHOICES:
         raise HTTPException(400, f"replay: must be one of {', '.join(REPLAY_CHOICES)}, got {replay!r}")
+    if "since" in query and replay == "active":
+        raise HTTPException(400, "since and replay=active exclude each other: since already sends what changed")
     return AlertFilter(types, zones), replay == "active"
+
+
+async def replay_since(websocket: WebSocket, state: GatewayState, wanted: AlertFilter) -> list[AlertMessage]:
+    """What the client missed since the alert ``?since=`` names; HTTPException(400) if it cannot be replayed."""
+    try:
+        return await asyncio.to_thread(missed_alerts, websocket.query_params["since"], websocket.app.state.recent_alerts,
+                                       state.history, wanted.types, wanted)  # a database query
+    except ReplayError as exc:
+        raise HTTPException(400, str(exc)) from None
 
 
 async def refuse(websocket: WebSocket, exc: HTTPException) -> None:
@@ -136,6 +152,18 @@ async def serve(websocket: WebSocket, sub: Subscription[Any], send: Callable[[An
             raise outcome
 
 
+def skip_replayed(send: Callable[[AlertMessage], Awaitable[None]],
+                  replayed: list[AlertMessage]) -> Callable[[AlertMessage], Awaitable[None]]:
+    """``send``, less the live alerts the replay already sent in the same or a newer state."""
+    sent = {a.id: position(a.event) for a in replayed}
+
+    async def send_new(alert: AlertMessage) -> None:
+        if alert.id not in sent or position(alert.event) > sent[alert.id]:
+            await send(alert)
+
+    return send_new
+
+
 def json_sender(websocket: WebSocket) -> Callable[[BaseModel], Awaitable[None]]:
     async def send(message: BaseModel) -> None:
         await websocket.send_text(message.model_dump_json())
@@ -156,8 +184,19 @@ async def alerts_stream(websocket: WebSocket) -> None:
     send = json_sender(websocket)
     # Subscribe before accepting, so that a client that sees the connection open is certain to get
     # every alert from then on; and before replaying, so an alert starting meanwhile is not lost
-    # (it may come twice: clients update alerts by id).
+    # (with replay=active it may come twice: clients update alerts by id).
     async with state.alerts.subscribe(wanted) as sub:
+        if "since" in websocket.query_params:
+            try:
+                missed = await replay_since(websocket, state, wanted)
+            except HTTPException as exc:
+                await refuse(websocket, exc)
+                return
+            await websocket.accept()
+            for alert in missed:
+                await send(alert)
+            await serve(websocket, sub, skip_replayed(send, missed))
+            return
         await websocket.accept()
         if replay:
             for event in state.active_alerts():

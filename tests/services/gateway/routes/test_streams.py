@@ -99,13 +99,58 @@ def test_replay_sends_the_active_alerts_first(server: str, state: GatewayState) 
     assert [a["id"] for a in received] == ["ongoing-gate", "end"]
 
 
+def _raised(event, at_ns: int):
+    return event.model_copy(update={"raised_ns": at_ns})
+
+
+def test_since_replays_what_came_after_that_alert_then_goes_on_live(server: str, state: GatewayState) -> None:
+    """Alerts in the order they were raised, each once in its newest state: the end of an alert
+    raised before the cursor is missed news, and alerts of other types or zones stay out."""
+    for event in [
+        _raised(incident("long", T0), T0 + S),
+        _raised(incident("seen", T0 + 2 * S), T0 + 3 * S),  # the last alert the client received
+        _raised(over_capacity("c1", T0 + 4 * S), T0 + 4 * S),
+        _raised(incident("long", T0, end_ns=T0 + 5 * S), T0 + 6 * S),
+        _raised(over_capacity("c-shop", T0 + 6 * S, zone="shop"), T0 + 7 * S),
+        _raised(violation("pair", T0 + 7 * S), T0 + 7 * S),
+        _raised(over_capacity("c1", T0 + 4 * S, end_ns=T0 + 8 * S), T0 + 8 * S),
+    ]:
+        state.apply(event)
+    with _open(server, "/ws/alerts?zones=gate&since=seen") as ws:
+        replayed = _receive_until(ws, "c1")
+        state.apply(_raised(incident("after", T0 + 9 * S), T0 + 9 * S))
+        live = _receive_until(ws, "after")
+    assert [(a["id"], a["active"]) for a in replayed] == [("long", False), ("c1", False)]
+    assert [a["id"] for a in live] == ["after"]
+
+
+def test_since_reads_alerts_the_gateway_never_saw_from_the_database(site: Site, tmp_path) -> None:
+    """A restarted gateway: the recorder's database is all it has."""
+    from bevflow_services.gateway.history_db import DatabaseHistory
+    from bevflow_services.storage import HistoryDatabase
+    from bevflow_services.storage.batch import Batch
+
+    db = HistoryDatabase.open(f"sqlite:///{tmp_path / 'history.db'}")
+    batch = Batch()
+    for k in range(5):
+        batch.add_event(_raised(incident(f"i{k}", T0 + k * S), T0 + k * S))
+    db.write(batch)
+    state = GatewayState(site, DatabaseHistory(db))
+    with serve_in_thread(create_app(site, state)) as address, _open(address, "/ws/alerts?since=i1") as ws:
+        replayed = _receive_until(ws, "i4")
+    assert [a["id"] for a in replayed] == ["i2", "i3", "i4"]
+
+
 @pytest.mark.parametrize(
     ("path", "detail"),
     [
+        ("/ws/alerts?since=nobody", "since: no alert 'nobody' in the history"),
+        ("/ws/alerts?since=", "since: give the id of the last alert received"),
+        ("/ws/alerts?since=x&replay=active", "since and replay=active exclude each other"),
         ("/ws/alerts?types=fire", "types: unknown value(s) fire; allowed: distance_violation, distance_incident, over_capacity"),
         ("/ws/alerts?zones=gate,roof", "zones: unknown value(s) roof; allowed: gate, shop"),
         ("/ws/alerts?replay=all", "replay: must be one of none, active, got 'all'"),
-        ("/ws/alerts?zone=gate", "unknown parameter(s) zone; allowed: types, zones, replay"),
+        ("/ws/alerts?zone=gate", "unknown parameter(s) zone; allowed: types, zones, replay, since"),
         ("/ws/tracks?zones=gate", "unknown parameter(s) zones; /ws/tracks takes only token"),
     ],
 )
