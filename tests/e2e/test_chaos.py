@@ -9,7 +9,10 @@ service) and polls REST. Afterwards:
 - every alert published on the bus is in the history the gateway serves, once, with its end;
 - a restarted tracker does not hand out an id that the previous one used;
 - after each restart, REST occupancy is back within tolerance of the simulator's truth in 2 s
-  of capture time.
+  of capture time;
+- then a forger on the bus (no bus password here) sends a tick dated 2262, one dated 1970 and a
+  flood of alerts, some dated 2262 too: the live tracks go on, the far-future messages are
+  refused and counted, and no real alert is lost.
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ from typing import Any
 
 import pytest
 
-from bevflow.schemas import Event, Occupancy, SimulatedTruth, Tracks
+from bevflow.schemas import DistanceViolation, Event, Occupancy, SimulatedTruth, Tracks
 from bevflow.site import dump_site
 
 from bevflow_services import bus
@@ -38,6 +41,8 @@ PEOPLE = 16
 TOLERANCE = max(3, PEOPLE // 5)  # as the end-to-end test: tracks confirm after 3 hits, die after 5 misses
 RECOVERY_S = 2.0
 KILL_ORDER = ("ingest", "projector", "tracker", "gateway", "recorder")
+FAR_FUTURE_NS = 2**63 - 1
+FORGED_ALERTS = 500  # well under the receivers' burst, so no real alert is refused meanwhile
 S = 1_000_000_000
 
 
@@ -194,6 +199,8 @@ class ChaosRun:
     events_before: dict[str, Any]
     history: list[dict[str, Any]]
     events_after: dict[str, Any]
+    forged_ns: int
+    health: dict[str, Any]
 
 
 def recovery(run_samples: list[tuple[int, int, int]], observer: Observer, up_ns: int, until_ns: int) -> float | None:
@@ -247,7 +254,9 @@ def chaos(tmp_path_factory: pytest.TempPathFactory):
             wait_until(lambda: recovery(poller.samples, observer, restart.up_ns, 2**63) is not None, 20,
                        f"occupancy recovering after {service} restarted", group)
             restarts.append(restart)
-        time.sleep(1.0)
+        forged_ns = forge(session, keys)
+        time.sleep(2.0)
+        health = get_json(f"{base}/api/health")
         for restart, following in zip(restarts, [*restarts[1:], None]):
             until = following.killed_ns if following else 2**63
             restart.recovered_s = recovery(poller.samples, observer, restart.up_ns, until)
@@ -255,13 +264,27 @@ def chaos(tmp_path_factory: pytest.TempPathFactory):
         time.sleep(1.0)  # the recorder commits every 0.1 s
         history = get_json(f"{base}/api/history/events?limit=10000")["items"]
         events_after = observer.latest_events()
-        yield ChaosRun(observer, poller, group, base, restarts, events_before, history, events_after)
+        yield ChaosRun(observer, poller, group, base, restarts, events_before, history, events_after, forged_ns, health)
     finally:
         if poller is not None:
             poller.close()
         group.stop()
         observer.close()
         session.close()
+
+
+def forge(session: Any, keys: bus.Keys) -> int:
+    """What anyone on a bus without a password can send: ticks dated 2262 and 1970, and a flood
+    of alerts (a tenth of them dated 2262). Returns when it started."""
+    started = time.time_ns()
+    with bus.Publication(session, keys.tracks, bus.JsonCodec(Tracks)) as ticks, \
+            bus.Publication(session, keys.events, bus.JsonCodec(Event, "Event"), block_when_congested=True) as alerts:
+        ticks.put(Tracks(site=keys.site, time_ns=FAR_FUTURE_NS))
+        ticks.put(Tracks(site=keys.site, time_ns=0))
+        for k in range(FORGED_ALERTS):
+            start = FAR_FUTURE_NS if k % 10 == 0 else started
+            alerts.put(DistanceViolation(id=f"forged-{k}", start_ns=start, tracks=[1, 2], min_distance_m=0.1, limit_m=2.0))
+    return started
 
 
 def test_no_service_stays_down(chaos: ChaosRun) -> None:
@@ -319,6 +342,17 @@ def test_the_restarted_gateway_serves_history_from_before_its_restart(chaos: Cha
     restart = next(r for r in chaos.restarts if r.service == "gateway")
     older = [item for item in chaos.history if item["start_ns"] < restart.killed_ns]
     assert older, "no alert from before the gateway's restart in its history"
+
+
+def test_a_forged_far_future_tick_and_an_alert_flood_do_not_stop_the_site(chaos: ChaosRun) -> None:
+    after = [(polled, capture) for polled, capture, _ in chaos.poller.samples if polled > chaos.forged_ns + S]
+    assert after, "no REST sample after the forger"
+    assert all(capture < chaos.forged_ns + 60 * S for _, capture in after)
+    assert after[-1][1] > chaos.forged_ns, "the live data stopped at the forged tick"
+    assert chaos.health["bus"]["rejected"].get("future_time", 0) >= 1 + FORGED_ALERTS // 10
+    stored = {item["id"] for item in chaos.history}
+    assert not {f"forged-{k}" for k in range(0, FORGED_ALERTS, 10)} & stored, "an alert dated 2262 was stored"
+    assert all(item["start_ns"] < chaos.forged_ns + 60 * S for item in chaos.history)
 
 
 # --- the router ----------------------------------------------------------------------------------

@@ -6,14 +6,17 @@ from __future__ import annotations
 
 import json
 import threading
+import time
 from typing import Any
 
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from pydantic import TypeAdapter
 
 from bevflow import schemas
+from bevflow.capture_time import CaptureWindow
 from bevflow_services import bus
 from tests.bevflow.test_schemas_fuzz import VALID_MESSAGES, json_values, mutated
 from tests.services.test_bus import free_port, wait_for
@@ -134,6 +137,30 @@ def test_frame_sizes_that_overflow_64_bits_are_rejected(width: int, height: int)
         assert caught.value.reason == "frame_size"
 
 
+# --- capture times against the receiver's clock -------------------------------------------------
+WINDOW = CaptureWindow(future_s=5.0, past_s=3600.0)
+NOW = 1_800_000_000 * 10**9
+FAR_TIMES = st.one_of(
+    st.integers(0, 2**63 - 1),
+    st.sampled_from([0, 1, 2**62, 2**63 - 1, NOW, NOW - 3600 * 10**9 - 1]),  # epoch, 2262, the past edge
+    st.integers(NOW - 10 * 10**9, NOW + 10 * 10**9),  # around the future edge
+)
+TIMED = sorted(name for name, (_, example) in VALID_MESSAGES.items() if any(k.endswith("_ns") for k in example))
+
+
+@FUZZ
+@given(name=st.sampled_from(TIMED), data=st.data())
+def test_every_time_a_message_carries_is_checked_against_the_clock(name: str, data: st.DataObject) -> None:
+    """Any message, with any of its times anywhere from 1970 to 2262: refused exactly when one
+    of them lies beyond the clock plus the window; far-past times are the live state's to judge."""
+    model, example = VALID_MESSAGES[name]
+    times = {k: data.draw(FAR_TIMES, label=k) for k in example if k.endswith("_ns")}
+    message = TypeAdapter(model).validate_python({**example, **times})
+    refused = WINDOW.first_too_new(message, NOW)
+    assert (refused is not None) == any(t > NOW + 5 * 10**9 for t in times.values())
+    assert refused is None or (refused[0] in times and times[refused[0]] == refused[1])
+
+
 # --- through a real session ----------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def sessions():
@@ -172,3 +199,28 @@ def test_a_subscription_survives_garbage_and_keeps_delivering(sessions, garbage,
     assert snapshot["handler_errors"] == 0 and "decoder_error" not in snapshot["rejected"]
     assert sum(snapshot["rejected"].values()) + snapshot["decoded"] == len(garbage) + 1
     assert received[-1] == good if codec_name != "Frame" else received[-1].header == good.header
+
+
+@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+                                                                 HealthCheck.function_scoped_fixture])
+@given(offsets_s=st.lists(st.one_of(st.sampled_from([-1e9, -3600.0, 0.0, 1.0, 60.0, 1e9]),
+                                    st.floats(-1e6, 1e6).filter(lambda o: not 2.0 < o < 8.0)), min_size=1, max_size=8))
+def test_a_subscription_refuses_far_future_ticks_and_delivers_the_rest(sessions, offsets_s: list[float]) -> None:
+    """Ticks from 1970 to 2262 over a real session: those beyond this host's clock plus the
+    window (5 s) are counted as future_time, every other one is delivered, in order. Offsets
+    close to the edge are left out: the receiver's clock moves on while they travel."""
+    publisher, subscriber = sessions
+    key = f"bevflow/fuzz/times/{threading.get_ident()}/{id(offsets_s)}"
+    codec = CODECS["Tracks"]
+    received: list[Any] = []
+    stats = bus.BusStats(log_every_s=3600)
+    now = time.time_ns()
+    ticks = [(min(max(0, now + int(offset * 1e9)), 2**63 - 1), offset <= 2.0) for offset in offsets_s]
+    with bus.subscribe(subscriber, key, codec, received.append, stats=stats, window=WINDOW), \
+            bus.Publication(publisher, key, codec) as pub:
+        assert pub.wait_for_subscribers(5.0)
+        for t, _ in ticks:
+            pub.put(schemas.Tracks(site="s", time_ns=t))
+        assert wait_for(lambda: stats.snapshot()["received"] == len(ticks))
+    assert [m.time_ns for m in received] == [t for t, live in ticks if live]
+    assert stats.snapshot()["rejected"].get("future_time", 0) == sum(not live for _, live in ticks)

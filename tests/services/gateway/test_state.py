@@ -1,8 +1,10 @@
 from __future__ import annotations
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
-from bevflow.alert_lease import BURST, LEASE_S
+from bevflow.alert_lease import BURST, LEASE_S, MAX_OPEN
 from bevflow.schemas import CameraHealthEvent, Detections2D, FrameHeader, OpenAlerts, TrackState, Tracks, ZoneOccupancy
 
 from bevflow_services.gateway.history import EventQuery
@@ -153,3 +155,27 @@ def test_tracks_the_history_refuses_are_ignored_not_raised(state: GatewayState) 
     assert state.apply(repeated_id) is False
     assert (state.ignored, state.tracks) == (1, None)
     assert state.apply(tracks(T0 + S, {1: (0.0, 0.0)}))
+
+
+ALERT_TIMES = st.one_of(st.integers(0, 2**63 - 1), st.sampled_from([0, 1, T0, 2**63 - 1]))
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(alerts=st.lists(st.tuples(st.sampled_from(["a", "b", "c"]) | st.text(min_size=1, max_size=8), ALERT_TIMES,
+                                 st.none() | ALERT_TIMES, st.floats(0, 30)), max_size=40),
+       renewed=st.sets(st.sampled_from(["a", "b", "c"])))
+def test_forged_alerts_with_any_times_end_by_themselves(site, alerts, renewed) -> None:
+    """Forged alerts, with start and end times anywhere from 1970 to 2262, repeated ids, gaps:
+    the open ones stay bounded, only renewed ones outlive the lease, and nothing raises."""
+    clock = FakeClock()
+    state = GatewayState(site, clock=clock)
+    for alert_id, start_ns, end_ns, gap_s in alerts:
+        state.apply(violation(alert_id, start_ns, end_ns=end_ns))
+        clock.advance(gap_s)
+        assert len(state.active_alerts()) <= MAX_OPEN
+    for _ in range(3):
+        clock.advance(LEASE_S / 2)
+        state.apply(OpenAlerts(site="hall", time_ns=T0, ids=sorted(renewed)))
+        state.end_lapsed_alerts()
+    assert {e.id for e in state.active_alerts()} <= renewed
+    assert {e.id for e in state.history.events(EventQuery(active=True), 1000)[0]} <= renewed
