@@ -336,6 +336,10 @@ class Keys:
         """Ground truth from a simulated ingest (``SimulatedTruth``)."""
         return f"{self.root}/sim/truth"
 
+    def metrics(self, service: str = "*", instance: str = "*") -> str:
+        """Each service instance's own measurements (``schemas.ServiceMetrics``)."""
+        return f"{self.root}/metrics/{_chunk(service, 'service name')}/{_chunk(instance, 'instance id')}"
+
     def alive(self, service: str = "*", instance: str = "*") -> str:
         return f"{self.root}/alive/{_chunk(service, 'service name')}/{_chunk(instance, 'instance id')}"
 

@@ -42,6 +42,7 @@ from bevflow_services import bus
 from bevflow_services.cli import UserError
 from bevflow_services.cli.serve import service_site, stop_on_signals
 from bevflow_services.detector.models import CameraModels
+from bevflow_services.service_metrics import MetricsBook, reporting
 
 log = logging.getLogger(__name__)
 SERVICE = "detector"
@@ -168,8 +169,9 @@ def main(args: argparse.Namespace) -> int:
     print(f"bevflow detector: site {site_id!r}, {len(cameras)} cameras, models {models.models()}, "
           f"on {', '.join(models.providers())}", flush=True)
     try:
-        with stop_on_signals() as stop:
-            serve(inboxes, publications, worker, stats, stop, wake)
+        book = MetricsBook()
+        with stop_on_signals() as stop, reporting(session, site_id, SERVICE, book):
+            serve(inboxes, publications, worker, stats, stop, wake, book)
     finally:
         token.undeclare()
         for inbox in inboxes.values():
@@ -181,8 +183,11 @@ def main(args: argparse.Namespace) -> int:
 
 
 def serve(inboxes: dict[str, _Inbox], publications: dict[str, bus.Publication[Detections2D]],
-          worker: FrameDetector, stats: bus.BusStats, stop: threading.Event, wake: threading.Event) -> None:
-    """Serve the cameras in turn, each its newest frame, until ``stop`` is set."""
+          worker: FrameDetector, stats: bus.BusStats, stop: threading.Event, wake: threading.Event,
+          book: MetricsBook | None = None) -> None:
+    """Serve the cameras in turn, each its newest frame, until ``stop`` is set; ``book`` gets
+    each frame's capture-to-published time."""
+    book = book if book is not None else MetricsBook()
     detected = 0
     next_report = time.monotonic() + REPORT_EVERY_S
     while not stop.is_set():
@@ -212,6 +217,7 @@ def serve(inboxes: dict[str, _Inbox], publications: dict[str, bus.Publication[De
         # camera it waits for has reported, so cameras of one instant should arrive together.
         for message in results:
             publications[message.camera].put(message)
+            book.observe("detector_latency_seconds", max(0.0, (time.time_ns() - message.capture_ns) / 1e9))
             detected += 1
         if time.monotonic() >= next_report:
             next_report += REPORT_EVERY_S

@@ -27,7 +27,16 @@ from typing import Any
 
 import uvicorn
 
-from bevflow.schemas import CameraCylinders, Detections2D, Event, FrameHeader, Occupancy, OpenAlerts, Tracks
+from bevflow.schemas import (
+    CameraCylinders,
+    Detections2D,
+    Event,
+    FrameHeader,
+    Occupancy,
+    OpenAlerts,
+    ServiceMetrics,
+    Tracks,
+)
 
 from bevflow_services import redact
 from bevflow_services.bus import (
@@ -219,6 +228,7 @@ def main(args: argparse.Namespace) -> int:
     keys = Keys(site_id)
     inputs = app.state.calibration_inputs = CalibrationInputs(fetch_frame=frame_fetcher(session, keys))
     cylinders = subscribe(session, keys.cylinders("*"), JsonCodec(CameraCylinders), inputs.put_cylinders, stats=stats)
+    services = subscribe(session, keys.metrics(), JsonCodec(ServiceMetrics), app.state.service_metrics.put, stats=stats)
     announce_setup(access, args)
     try:
         config = uvicorn.Config(app, host=args.host, port=args.port, log_level="info",
@@ -227,6 +237,7 @@ def main(args: argparse.Namespace) -> int:
         uvicorn.Server(config).run()
     finally:
         cylinders.close()
+        services.close()
         session.close()
     return 0
 

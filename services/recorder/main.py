@@ -28,6 +28,7 @@ from bevflow_services import bus
 from bevflow_services.cli import UserError
 from bevflow_services.cli.serve import service_site, stop_on_signals
 from bevflow_services.recorder.recorder import Recorder
+from bevflow_services.service_metrics import MetricsBook, reporting
 from bevflow_services.storage import HistoryDatabase, RetentionPolicy, StorageDamaged, StorageError, StorageUnavailable
 
 log = logging.getLogger(__name__)
@@ -97,8 +98,9 @@ def main(args: argparse.Namespace) -> int:
     token = bus.announce(session, keys, SERVICE)  # after subscribing: "alive" means "recording"
     print(f"bevflow recorder: site {site_id!r} into {db.url}, commit every {args.commit_interval:g} s", flush=True)
     try:
-        with stop_on_signals() as stop:
-            run(recorder, policy, stop, args.commit_interval, args.retention_every)
+        book = MetricsBook()
+        with stop_on_signals() as stop, reporting(session, site_id, SERVICE, book):
+            run(recorder, policy, stop, args.commit_interval, args.retention_every, book)
     except StorageDamaged as exc:
         raise UserError(str(exc)) from None
     finally:
@@ -116,25 +118,30 @@ def main(args: argparse.Namespace) -> int:
 
 
 def run(recorder: Recorder, policy: RetentionPolicy, stop: threading.Event, commit_interval: float,
-        retention_every: float) -> None:
+        retention_every: float, book: MetricsBook | None = None) -> None:
     """Flush every ``commit_interval`` and apply retention every ``retention_every`` seconds until
-    ``stop`` is set."""
+    ``stop`` is set; ``book`` gets each flush's time and the rows still pending."""
+    book = book if book is not None else MetricsBook()
     next_flush = next_retention = time.monotonic()
     down_since: float | None = None
     while not stop.wait(max(0.0, next_flush - time.monotonic())):
         next_flush = max(next_flush + commit_interval, time.monotonic())
         try:
-            recorder.flush()
+            started = time.perf_counter()
+            if recorder.flush():  # a flush with nothing to write is no database write
+                book.observe("history_write_seconds", time.perf_counter() - started)
             if time.monotonic() >= next_retention:
                 now = recorder.clock()
                 result = recorder.db.apply_retention(policy, now, latest_ns=recorder.window.latest_ns(now))
                 recorder.end_lapsed_alerts()
                 # A backlog (first run, a retention shortened) is worked off a slice per flush.
                 next_retention = time.monotonic() + (retention_every if result.done else 0.0)
+            book.set("history_backlog_rows", recorder.pending())
             if down_since is not None:
                 log.info("database back after %.1f s; %d rows pending", time.monotonic() - down_since, recorder.pending())
                 down_since = None
         except StorageUnavailable as exc:
+            book.set("history_backlog_rows", recorder.pending())
             if down_since is None:
                 down_since = time.monotonic()
                 log.warning("database unavailable, keeping %d rows to retry: %s", recorder.pending(), exc)

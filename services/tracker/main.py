@@ -33,6 +33,7 @@ from bevflow.schemas import CameraCylinders, CameraHealthEvent, Event, Occupancy
 from bevflow_services import bus
 from bevflow_services.cli import UserError
 from bevflow_services.cli.serve import service_site, stop_on_signals
+from bevflow_services.service_metrics import MetricsBook, reporting
 from bevflow_services.tracker.ticks import TickHandler
 from bevflow_services.tracker.track_ids import TrackIdError, TrackIdReservation
 
@@ -156,6 +157,9 @@ def main(args: argparse.Namespace) -> int:
         site.camera_ids, period_ns=int(args.tick_ms * 1e6), max_wait_ns=int(args.max_wait_ms * 1e6))
     watch = CameraWatch(site.camera_ids, int(args.camera_timeout * 1e9), time.time_ns(), int(args.camera_up_after * 1e9))
     lock = threading.Lock()
+    book = MetricsBook()
+    for camera in site.camera_ids:  # every camera's series from the start, at 0
+        book.count("camera_frames_late", 0, camera=camera)
 
     def on_cylinders(message: CameraCylinders) -> None:  # on a Zenoh thread
         with lock:
@@ -163,6 +167,8 @@ def main(args: argparse.Namespace) -> int:
             result = assembler.push(message.camera, message.capture_ns, message, now_ns=now)
             if result == "accepted":
                 watch.seen(message.camera, now)
+        if result == "late":
+            book.count("camera_frames_late", camera=message.camera)
         if result != "accepted":
             log.debug("cylinders from %s at %d: %s", message.camera, message.capture_ns, result)
 
@@ -185,7 +191,7 @@ def main(args: argparse.Namespace) -> int:
     print(f"bevflow tracker: site {site_id!r}, {len(site.camera_ids)} cameras, tick {args.tick_ms:g} ms; "
           f"calibration drift watch {watch_line}", flush=True)
     try:
-        with stop_on_signals() as stop:
+        with stop_on_signals() as stop, reporting(session, site_id, SERVICE, book):
             while not stop.wait(0.01):
                 with lock:
                     now = time.time_ns()
@@ -195,7 +201,8 @@ def main(args: argparse.Namespace) -> int:
                     raise_alert(event)
                 for tick in ticks:
                     try:
-                        output = handler.handle(tick)
+                        with book.timed("tick_duration_seconds"):
+                            output = handler.handle(tick)
                     except Exception:  # a bug on one tick must not stop the site
                         stats.count("handler_errors")
                         log.exception("tracking failed at tick %d; skipping it", tick.time_ns)

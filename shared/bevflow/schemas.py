@@ -379,6 +379,50 @@ class OpenAlerts(Message):
     ids: list[str] = Field(default_factory=list)
 
 
+# --- a service's own measurements, for the gateway's /metrics --------------------------------------
+SeriesName = Annotated[str, Field(pattern=r"^[a-z][a-z0-9_]{0,63}$")]
+SeriesLabels = Annotated[dict[str, Annotated[str, Field(max_length=64)]], Field(max_length=4)]
+
+
+class MetricSeries(BaseModel):
+    """A counter (total since the process started) or a gauge (a value now)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    name: SeriesName
+    labels: SeriesLabels = Field(default_factory=dict)
+    value: Finite
+
+
+class HistogramSeries(BaseModel):
+    """Observations since the process started: ``counts[i]`` of them at most ``bounds[i]``."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    name: SeriesName
+    labels: SeriesLabels = Field(default_factory=dict)
+    bounds: Annotated[list[Finite], Field(max_length=32)]
+    counts: Annotated[list[Annotated[int, Field(ge=0)]], Field(max_length=32)]
+    count: Annotated[int, Field(ge=0)]
+    sum: Finite
+
+    @model_validator(mode="after")
+    def _one_count_per_bound(self) -> HistogramSeries:
+        if len(self.counts) != len(self.bounds):
+            raise ValueError(f"{len(self.bounds)} bounds but {len(self.counts)} counts")
+        return self
+
+
+class ServiceMetrics(Message):
+    """What one service instance measured about itself (``bevflow_services.service_metrics``),
+    published every few seconds; the gateway serves it on ``/metrics``."""
+
+    site: str
+    service: str
+    instance: str
+    time_ns: Annotated[int, Field(ge=0)]
+    values: Annotated[list[MetricSeries], Field(max_length=256)] = Field(default_factory=list)
+    histograms: Annotated[list[HistogramSeries], Field(max_length=64)] = Field(default_factory=list)
+
+
 def zones_named(message: BaseModel) -> set[str]:
     """The zone ids a tracker message names (its tracks', counts' or alert's), for a receiver to
     check against its site: a forged id must not reach the history, the API or a CSV export.

@@ -45,6 +45,10 @@ VALID_MESSAGES: dict[str, tuple[Any, dict[str, Any]]] = {
     "CameraHealthEvent": (schemas.Event, {"type": "camera_down", "id": "ch", "start_ns": 1, "camera": "a",
                                           "reason": "no frames"}),
     "OpenAlerts": (schemas.OpenAlerts, {"site": "s", "time_ns": 5, "ids": ["dv", "oc"]}),
+    "ServiceMetrics": (schemas.ServiceMetrics, {
+        "site": "s", "service": "tracker", "instance": "t1", "time_ns": 5,
+        "values": [{"name": "camera_frames_late", "labels": {"camera": "c"}, "value": 2}],
+        "histograms": [{"name": "tick_duration_seconds", "bounds": [0.01, 0.1], "counts": [1, 3], "count": 4, "sum": 0.2}]}),
 }
 VALID_MESSAGES["AlertMessage"] = (schemas.AlertMessage, json.loads(schemas.AlertMessage.from_event(
     schemas.decode_event(json.dumps(VALID_MESSAGES["DistanceViolation"][1]))).model_dump_json()))

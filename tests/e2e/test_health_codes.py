@@ -1,5 +1,6 @@
 """/api/health's status code follows a camera: 503 soon after its ingest stops, 200 again once
-it is back (and reported up by the tracker), with /metrics saying the same."""
+it is back (and reported up by the tracker), with /metrics saying the same; /metrics also serves
+what the tracker measures about itself, sent over the bus."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ import pytest
 from bevflow.site import load_site_or_builtin
 
 from bevflow_services.launcher import ServiceGroup, free_port
+from bevflow_services.service_metrics import REPORT_EVERY_S
 
 pytestmark = [pytest.mark.e2e, pytest.mark.slow]
 
@@ -41,6 +43,20 @@ def metric(base: str, line_start: str) -> float | None:
             if line.startswith(line_start + " "):
                 return float(line.split()[-1])
     return None
+
+
+def samples(base: str, name: str) -> list[str]:
+    """The /metrics lines of series ``name``, whatever their labels."""
+    with urllib.request.urlopen(f"{base}/metrics", timeout=5) as response:
+        return [line for line in response.read().decode().splitlines() if line.startswith((name + " ", name + "{"))]
+
+
+def wait_for_samples(base: str, name: str, timeout_s: float) -> list[str]:
+    deadline = time.monotonic() + timeout_s
+    while not (found := samples(base, name)):
+        assert time.monotonic() < deadline, f"no {name} on /metrics within {timeout_s:.0f} s"
+        time.sleep(0.25)
+    return found
 
 
 def wait_for_status(url: str, code: int, timeout_s: float, group: ServiceGroup) -> float:
@@ -72,6 +88,11 @@ def test_health_is_503_while_a_camera_is_stopped(tmp_path: Path) -> None:
         one = start_ingest(group, [STOPPED], "ingest-one")
         wait_for_status(f"{base}/api/health", 200, 60.0, group)
         assert metric(base, "bevflow_site_ok") == 1.0
+        within = 2 * REPORT_EVERY_S + 5  # the tracker reports every REPORT_EVERY_S
+        [ticks] = wait_for_samples(base, "bevflow_tick_duration_seconds_count", within)
+        assert float(ticks.split()[-1]) > 0
+        late = samples(base, "bevflow_camera_frames_late_total")
+        assert all(any(f'camera="{camera}"' in line for line in late) for camera in cameras), late
 
         os.killpg(one.process.pid, signal.SIGTERM)
         one.process.wait(10)

@@ -18,5 +18,6 @@ router = APIRouter(tags=["health"])
 
 @router.get("/metrics", include_in_schema=False)
 def metrics(request: Request, state: StateDep) -> Response:
-    body = exposition(state, getattr(request.app.state, "bus_stats", None))
+    extras = request.app.state
+    body = exposition(state, getattr(extras, "bus_stats", None), extras.alert_tally, extras.service_metrics)
     return Response(body, media_type=CONTENT_TYPE_LATEST)

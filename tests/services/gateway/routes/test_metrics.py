@@ -7,13 +7,15 @@ import json
 import re
 from pathlib import Path
 
+import pytest
 from fastapi.testclient import TestClient
 from prometheus_client.parser import text_string_to_metric_families
 
-from bevflow.schemas import CameraHealthEvent, FrameHeader
+from bevflow.schemas import CameraHealthEvent, FrameHeader, ServiceMetrics
 from bevflow.site import Site
 
 from bevflow_services.bus import BusStats
+from bevflow_services.service_metrics import MetricsBook
 from bevflow_services.gateway.state import GatewayState
 from tests.services.gateway.access import secured_client
 from tests.services.gateway.feed import S, T0, FakeClock, incident, occupancy, tracks
@@ -94,15 +96,81 @@ def test_metrics_need_a_viewer_token(site: Site, state: GatewayState) -> None:
         assert scrape(client, headers={"Authorization": f"Bearer {secure.tokens['viewer']}"})
 
 
-def test_the_grafana_dashboard_asks_only_for_series_that_exist(client: TestClient, state: GatewayState) -> None:
+def test_the_grafana_dashboard_asks_only_for_series_that_exist(client: TestClient, state: GatewayState,
+                                                               clock: FakeClock) -> None:
+    _fed_gateway(client, state, clock)
     state.apply(tracks(T0, {1: (0.0, 0.0)}))
     state.apply(tracks(T0 + S // 10, {1: (0.0, 0.0)}))
     state.apply(occupancy(T0, total=1))
     client.app.state.bus_stats = BusStats()  # type: ignore[attr-defined]
-    suffixes = {"counter": ("",), "summary": ("_sum", "_count"), "gauge": ("",)}  # counters' TYPE has _total
+    suffixes = {"counter": ("",), "summary": ("_sum", "_count"), "gauge": ("",),  # counters' TYPE has _total
+                "histogram": ("_bucket", "_sum", "_count")}
     served = {name + suffix for name, kind in re.findall(r"^# TYPE (\S+) (\w+)$", client.get("/metrics").text, re.M)
               for suffix in suffixes[kind]}  # every family, with or without samples now
     dashboard = json.loads((Path(__file__).resolve().parents[4] / "docker" / "grafana-dashboard.json").read_text())
     asked = {name for panel in dashboard["panels"] for target in panel["targets"]
              for name in re.findall(r"\bbevflow_[a-z_]+", target["expr"])}
     assert asked and asked <= served, sorted(asked - served)
+
+
+def _report(service: str, instance: str, book: MetricsBook, time_ns: int) -> ServiceMetrics:
+    return book.message("hall", service, instance, time_ns)
+
+
+# What issue 20 asks /metrics for, and the series that answer it (labels each must carry).
+REQUIRED = [
+    ("frames in, per camera", "bevflow_camera_frames_received_total", {"camera": "north"}),
+    ("frames dropped, per camera", "bevflow_camera_frames_dropped_total", {"camera": "north"}),
+    ("frames late, per camera", "bevflow_camera_frames_late_total", {"camera": "south", "instance": "t1"}),
+    ("detector latency histogram", "bevflow_detector_latency_seconds_bucket", {"le": "0.1", "instance": "d1"}),
+    ("tick duration", "bevflow_tick_duration_seconds_count", {"instance": "t1"}),
+    ("frame-to-alert latency", "bevflow_frame_to_alert_seconds_count", {}),
+    ("open incidents", "bevflow_alerts_active", {"type": "distance_incident"}),
+    ("alerts raised by type", "bevflow_alerts_raised_total", {"type": "distance_incident"}),
+    ("websocket clients", "bevflow_websocket_clients", {"stream": "alerts"}),
+    ("history write latency", "bevflow_history_write_seconds_count", {"instance": "r1"}),
+    ("history backlog", "bevflow_history_backlog_rows", {"instance": "r1"}),
+]
+
+
+def _fed_gateway(client: TestClient, state: GatewayState, clock: FakeClock) -> None:
+    """The state fed as in a running site, and one report from each service that measures itself."""
+    state.apply(frame("north", 1, T0))
+    state.apply(incident("i1", T0).model_copy(update={"raised_ns": T0}))
+    detector, tracker, recorder = MetricsBook(), MetricsBook(), MetricsBook()
+    detector.observe("detector_latency_seconds", 0.08)
+    tracker.count("camera_frames_late", camera="south")
+    tracker.observe("tick_duration_seconds", 0.004)
+    recorder.observe("history_write_seconds", 0.002)
+    recorder.set("history_backlog_rows", 12)
+    store = client.app.state.service_metrics  # type: ignore[attr-defined]
+    for service, instance, book in (("detector", "d1", detector), ("tracker", "t1", tracker), ("recorder", "r1", recorder)):
+        store.put(_report(service, instance, book, clock()))
+
+
+@pytest.mark.parametrize(("what", "name", "labels"), REQUIRED, ids=[r[0] for r in REQUIRED])
+def test_every_series_the_issue_asks_for_is_served(client: TestClient, state: GatewayState, clock: FakeClock,
+                                                    what: str, name: str, labels: dict) -> None:
+    _fed_gateway(client, state, clock)
+    m = scrape(client)
+    assert (name, tuple(sorted(labels.items()))) in m, sorted(k for k in m if k[0] == name)
+
+
+def test_service_reports_become_series_and_go_when_the_service_stops(client: TestClient, state: GatewayState,
+                                                                     clock: FakeClock) -> None:
+    _fed_gateway(client, state, clock)
+    m = scrape(client)
+    assert m[("bevflow_detector_latency_seconds_bucket", (("instance", "d1"), ("le", "0.05")))] == 0
+    assert m[("bevflow_detector_latency_seconds_bucket", (("instance", "d1"), ("le", "0.1")))] == 1
+    assert m[("bevflow_history_backlog_rows", (("instance", "r1"),))] == 12
+    assert m[("bevflow_alerts_raised_total", (("type", "over_capacity"),))] == 0
+    assert m[("bevflow_frame_to_alert_seconds_count", ())] == 1
+    clock.advance(60)  # no report for a minute: those instances are gone
+    assert not any(k[0].startswith("bevflow_history_") for k in scrape(client))
+
+
+def test_a_report_cannot_add_series_of_its_own(client: TestClient, clock: FakeClock) -> None:
+    forged = ServiceMetrics.model_validate({"site": "hall", "service": "x", "instance": "x", "time_ns": clock(),
+                                            "values": [{"name": "site_ok", "value": 1}, {"name": "anything", "value": 1}]})
+    client.app.state.service_metrics.put(forged)  # type: ignore[attr-defined]
+    assert [k for k in scrape(client) if k[0].endswith(("anything", "anything_total"))] == []
