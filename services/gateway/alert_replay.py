@@ -1,8 +1,9 @@
 """``/ws/alerts?since=ID``: the alerts a client missed, from the history, in the order they were sent.
 
-Every alert message has a position: the capture time of the data that raised it (``raised_ns``;
-its end, else its start, for an event without one), then its id. The tracker raises alerts in
-capture-time order, so positions follow the order in which the gateway sends them. A client that
+Every alert message has a position: the latest of its times, which is the capture time of the
+data that raised it (``raised_ns``) for what the tracker sends, and the end for an alert the
+gateway or the recorder ended because its lease ran out; then its id. The tracker raises alerts
+in capture-time order, so positions follow the order in which the gateway sends them. A client that
 reconnects with the id of the last alert it received gets every alert whose newest message comes
 after that alert's newest message, in position order, each once in its newest state (the history
 keeps one row per alert, updated when it changes or ends); then the live stream, less what the
@@ -38,9 +39,8 @@ class ReplayError(ValueError):
 
 def position(event: Event) -> Position:
     """Where the message carrying ``event`` stands in the alert stream."""
-    if event.raised_ns is not None:
-        return event.raised_ns, event.id
-    return (event.end_ns if event.end_ns is not None else event.start_ns), event.id
+    times = [t for t in (event.raised_ns, event.end_ns) if t is not None]
+    return max(times, default=event.start_ns), event.id
 
 
 class RecentAlerts:

@@ -101,16 +101,18 @@ class CameraWatch:
         for camera, last in self.last_ns.items():
             silent = now_ns - last > self.timeout_ns
             if silent and camera not in self.down:
+                # raised_ns, as every alert has: when it was found, which orders it among the
+                # alerts (a client resuming the alert websocket relies on it).
                 self.down[camera] = CameraHealthEvent(
                     id=f"camera-{camera}-{last}", type="camera_down", camera=camera, start_ns=last,
-                    reason=f"no results for {self.timeout_ns / 1e9:.0f} s")
+                    raised_ns=now_ns, reason=f"no results for {self.timeout_ns / 1e9:.0f} s")
                 events.append(self.down[camera])
             elif not silent and camera in self.down and now_ns - self.back_ns.get(camera, last) >= self.up_after_ns:
                 back = self.back_ns.pop(camera, last)
-                ended = self.down.pop(camera).model_copy(update={"end_ns": back})
+                ended = self.down.pop(camera).model_copy(update={"end_ns": back, "raised_ns": now_ns})
                 events.append(ended)
                 events.append(CameraHealthEvent(id=f"{ended.id}-up", type="camera_up", camera=camera,
-                                                start_ns=back, end_ns=back))
+                                                start_ns=back, end_ns=back, raised_ns=now_ns))
         return events
 
 

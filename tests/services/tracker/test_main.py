@@ -12,12 +12,12 @@ def test_a_silent_camera_goes_down_once_and_comes_back_up() -> None:
     watch.seen("a", 4 * S)
     assert watch.check(5 * S) == []
     (down,) = watch.check(6 * S)  # b silent since 0
-    assert (down.type, down.camera, down.start_ns, down.end_ns) == ("camera_down", "b", 0, None)
+    assert (down.type, down.camera, down.start_ns, down.end_ns, down.raised_ns) == ("camera_down", "b", 0, None, 6 * S)
     assert watch.check(7 * S) == []  # reported once, not every tick
     watch.seen("b", 8 * S)
     ended, up = watch.check(8 * S)
-    assert (ended.id, ended.type, ended.end_ns) == (down.id, "camera_down", 8 * S)
-    assert up.type == "camera_up" and up.camera == "b"
+    assert (ended.id, ended.type, ended.end_ns, ended.raised_ns) == (down.id, "camera_down", 8 * S, 8 * S)
+    assert up.type == "camera_up" and up.camera == "b" and up.raised_ns == 8 * S
 
 
 def test_a_camera_that_keeps_dropping_out_is_one_alert_until_it_reports_steadily() -> None:
