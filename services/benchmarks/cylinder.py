@@ -16,6 +16,7 @@ noise, and silhouettes whose lower 30 % is hidden.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import time
@@ -121,10 +122,10 @@ def bench_speed(camera_name: str, sizes: list[int], repeats: int, reference_repe
         start = time.perf_counter()
         fast = fit_cylinders(camera, boxes)
         cold_ms = (time.perf_counter() - start) * 1e3
-        batched = time_calls(lambda: fit_cylinders(camera, boxes), repeats)
+        batched = time_calls(functools.partial(fit_cylinders, camera, boxes), repeats)
         checked = min(n, reference_max_boxes or n)
         subset = boxes[:checked]
-        reference = time_calls(lambda: fit_cylinders_reference(camera, subset), reference_repeats)
+        reference = time_calls(functools.partial(fit_cylinders_reference, camera, subset), reference_repeats)
         slow, fast = reference.result, fast[:checked]
         both = np.isfinite(fast.xy).all(axis=1) & np.isfinite(slow.xy).all(axis=1)
         rows.append({
