@@ -25,7 +25,14 @@ from dataclasses import replace
 import numpy as np
 
 from bevflow.camera import Camera, FisheyeCamera, PinholeCamera, rotation_from_ypr
-from bevflow.cylinder import CylinderGrid, box_anchor, clear_lookup_cache, fit_cylinders, fit_cylinders_reference
+from bevflow.cylinder import (
+    CylinderGrid,
+    ProjectionMethod,
+    box_anchor,
+    clear_lookup_cache,
+    fit_cylinders,
+    fit_cylinders_reference,
+)
 from bevflow.detections import Boxes
 
 from bevflow_services.benchmarks.timing import time_calls
@@ -153,7 +160,7 @@ def format_speed(rows: list[dict]) -> list[str]:
     ]
 
 
-ESTIMATORS = {
+ESTIMATORS: dict[str, tuple[ProjectionMethod, CylinderGrid]] = {
     "bbox-center": ("bbox-center", CylinderGrid()),
     "nearest-point": ("nearest-point", CylinderGrid()),
     "cylinder, paper weights (IoU)": ("cylinder", CylinderGrid(weight_power=1.0)),

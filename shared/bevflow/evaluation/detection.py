@@ -52,17 +52,24 @@ IntArray = NDArray[np.int64]
 
 class AnnotatedView(Protocol):
     """One camera's boxes in one frame and whose they are. A view may also carry ``visible_xyxy``
-    (N, 4), the visible extent of each box, which the noise model then uses for truncation."""
+    (N, 4), the visible extent of each box, which the noise model then uses for truncation.
+    The protocols here are read-only: datasets are frozen."""
 
-    boxes: Boxes
-    person_ids: IntArray
+    @property
+    def boxes(self) -> Boxes: ...
+    @property
+    def person_ids(self) -> IntArray: ...
 
 
 class AnnotatedFrame(Protocol):
-    frame: int
-    person_ids: IntArray
-    feet_xy: FloatArray
-    views: Sequence[AnnotatedView]
+    @property
+    def frame(self) -> int: ...
+    @property
+    def person_ids(self) -> IntArray: ...
+    @property
+    def feet_xy(self) -> FloatArray: ...
+    @property
+    def views(self) -> Sequence[AnnotatedView]: ...
 
 
 class Area(Protocol):
@@ -72,10 +79,14 @@ class Area(Protocol):
 class AnnotatedDataset(Protocol):
     """What an evaluation needs; ``bevflow.datasets.wildtrack.WildtrackDataset`` is one."""
 
-    camera_ids: Sequence[str]
-    cameras: Sequence[Camera]
-    frames: Sequence[AnnotatedFrame]
-    area: Area
+    @property
+    def camera_ids(self) -> Sequence[str]: ...
+    @property
+    def cameras(self) -> Sequence[Camera]: ...
+    @property
+    def frames(self) -> Sequence[AnnotatedFrame]: ...
+    @property
+    def area(self) -> Area: ...
 
 
 @dataclass(frozen=True)

@@ -116,7 +116,8 @@ class TrackingEvaluation:
 class TimedDataset(AnnotatedDataset, Protocol):
     """An annotated dataset whose frame numbers map to capture times."""
 
-    seconds_per_frame_number: float
+    @property
+    def seconds_per_frame_number(self) -> float: ...
 
 
 def evaluate_tracking(
