@@ -44,7 +44,7 @@ from collections.abc import Callable, Iterable, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Generic, Literal, Protocol, TypeVar
+from typing import Any, Generic, Literal, Protocol, TypeVar, overload
 
 import numpy as np
 import zenoh
@@ -434,11 +434,17 @@ class Codec(Protocol[M]):
 
 
 class JsonCodec(Generic[M]):
-    """A :mod:`bevflow.schemas` message (or a union such as ``schemas.Event``) as JSON."""
+    """A :mod:`bevflow.schemas` message (or a union such as ``schemas.Event``) as JSON. A union
+    is not a class, so its codec names its type: ``JsonCodec[Event](Event, "Event")``."""
+
+    @overload
+    def __init__(self, message_type: type[M], name: str | None = None) -> None: ...
+    @overload
+    def __init__(self, message_type: Any, name: str) -> None: ...
 
     def __init__(self, message_type: Any, name: str | None = None) -> None:
         self.adapter: TypeAdapter[M] = TypeAdapter(message_type)
-        self.name = name or getattr(message_type, "__name__", "message")
+        self.name: str = name or str(getattr(message_type, "__name__", "message"))
         self.encoding = zenoh.Encoding.APPLICATION_JSON.with_schema(f"bevflow/{self.name}/v{SCHEMA_VERSION}")
 
     def encode(self, message: M) -> tuple[bytes, bytes | None, zenoh.Encoding]:

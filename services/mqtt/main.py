@@ -104,7 +104,7 @@ def main(args: argparse.Namespace) -> int:
 
     session = bus.open_session(bus.config_from_args(args))
     subscriptions = [
-        bus.HistorySubscription(session, keys.events, bus.JsonCodec(Event, "Event"), on_event),
+        bus.HistorySubscription(session, keys.events, bus.JsonCodec[Event](Event, "Event"), on_event),
         bus.subscribe(session, keys.occupancy, bus.JsonCodec(Occupancy), on_occupancy),
     ]
     token = bus.announce(session, keys, SERVICE)

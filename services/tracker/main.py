@@ -148,7 +148,7 @@ def main(args: argparse.Namespace) -> int:
     stats = bus.BusStats()
     tracks_out = bus.Publication(session, keys.tracks, bus.JsonCodec(Tracks))
     occupancy_out = bus.Publication(session, keys.occupancy, bus.JsonCodec(Occupancy))
-    events_out = bus.CachedPublication(session, keys.events, bus.JsonCodec(Event, "Event"), cache=args.event_cache)
+    events_out = bus.CachedPublication(session, keys.events, bus.JsonCodec[Event](Event, "Event"), cache=args.event_cache)
     inbox = bus.subscribe(session, keys.cylinders("*"), bus.JsonCodec(CameraCylinders), on_cylinders, stats=stats)
     token = bus.announce(session, keys, SERVICE)
     drift = handler.drift.config if handler.drift is not None else None
