@@ -61,8 +61,8 @@ def frame_for(height_m: float) -> tuple[np.ndarray, float]:
     try:
         from bevflow.detect.benchmark import rendered_frame
     except ImportError:
-        rendered_frame = None
-    if rendered_frame is not None:
+        pass
+    else:
         return rendered_frame(height_m)
     f = scaled_focal(height_m) * 1.5
     size = int(math.ceil(2 * f * math.radians(92.5)))

@@ -162,8 +162,8 @@ def main(args: argparse.Namespace) -> int:
                     now = time.time_ns()
                     ticks = assembler.pop_ready(now_ns=now)
                     health = watch.check(now)
-                for event in health:
-                    events_out.put(event)
+                for alert in health:
+                    events_out.put(alert)
                 for tick in ticks:
                     try:
                         output = handler.handle(tick)

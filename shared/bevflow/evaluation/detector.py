@@ -24,7 +24,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, Protocol, runtime_checkable
 
 import cv2
 import numpy as np
@@ -160,9 +160,15 @@ class ImageDetector(Protocol):
     """What ``evaluate_detector`` needs (``bevflow.detect.runtime.Detector`` is one). A detector
     that knows each box's angle also has ``detect_rotated(image, camera_height_m, focal_px,
     centre) -> (rotated (N, 5), confidence (N,))``; the others' boxes are turned to their radial
-    angle about the image circle's centre for ``AP50_rotated``."""
+    angle about the image circle's centre for ``AP50_rotated``. Frames given a plain scale need
+    a ``ScaledDetector``."""
 
     def detect(self, image_bgr: NDArray[np.uint8], camera_height_m: float, focal_px: float) -> Boxes: ...
+
+
+@runtime_checkable
+class ScaledDetector(Protocol):
+    """A detector that can also take a frame already resized by a known factor."""
 
     def detect_scaled(self, image_bgr: NDArray[np.uint8], scale: float = 1.0) -> Boxes: ...
 
@@ -201,6 +207,8 @@ def run_on_frame(detector: ImageDetector, image: NDArray[np.uint8], setup: Frame
         rotated, conf = detector.detect_rotated(image, setup.camera_height_m, setup.focal_px, setup.centre)
         return rotated_to_xyxy(rotated), np.asarray(rotated, np.float64).reshape(-1, 5), np.asarray(conf, np.float64)
     if setup.scale is not None:
+        if not isinstance(detector, ScaledDetector):
+            raise ValueError("this detector needs each frame's camera height and focal length, not a scale")
         boxes = detector.detect_scaled(image, setup.scale)
     elif setup.camera_height_m is not None and setup.focal_px is not None:
         boxes = detector.detect(image, setup.camera_height_m, setup.focal_px)
