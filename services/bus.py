@@ -46,7 +46,7 @@ from collections.abc import Callable, Iterable, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Generic, Literal, Protocol, TypeVar
+from typing import Any, Generic, Literal, Protocol, TypeVar, overload
 
 import numpy as np
 import zenoh
@@ -95,13 +95,13 @@ class Security:
             return None
         tls, auth = section.tls, section.auth
         return cls(
-            root_ca=_readable(tls and tls.root_ca, "bus.tls.root_ca"),
-            cert=_readable(tls and tls.cert, "bus.tls.cert"),
-            key=_readable(tls and tls.key, "bus.tls.key"),
+            root_ca=_readable(tls.root_ca if tls else None, "bus.tls.root_ca"),
+            cert=_readable(tls.cert if tls else None, "bus.tls.cert"),
+            key=_readable(tls.key if tls else None, "bus.tls.key"),
             mutual=bool(tls and tls.mutual),
             user=auth.user if auth else None,
             password=_password(auth.password_file, auth.password_env, environ) if auth and auth.user else None,
-            users_file=_readable(auth and auth.users_file, "bus.auth.users_file"),
+            users_file=_readable(auth.users_file if auth else None, "bus.auth.users_file"),
         )
 
     def apply(self, conf: zenoh.Config) -> None:
@@ -242,7 +242,7 @@ def config_from_args(args: argparse.Namespace, *, mode: Mode | None = None) -> B
     With ``args.site`` (a site file or built-in name), its ``bus:`` section adds TLS and
     credentials; a site that does not load is left for the service to report."""
     return BusConfig(
-        mode=mode or getattr(args, "mode", "peer"),
+        mode=mode if mode is not None else getattr(args, "mode", "peer"),
         connect=tuple(args.connect),
         listen=tuple(args.listen),
         multicast_scouting=args.multicast_scouting,
@@ -446,11 +446,17 @@ class Codec(Protocol[M]):
 
 
 class JsonCodec(Generic[M]):
-    """A :mod:`bevflow.schemas` message (or a union such as ``schemas.Event``) as JSON."""
+    """A :mod:`bevflow.schemas` message (or a union such as ``schemas.Event``) as JSON. A union
+    is not a class, so its codec names its type: ``JsonCodec[Event](Event, "Event")``."""
+
+    @overload
+    def __init__(self, message_type: type[M], name: str | None = None) -> None: ...
+    @overload
+    def __init__(self, message_type: Any, name: str) -> None: ...
 
     def __init__(self, message_type: Any, name: str | None = None) -> None:
         self.adapter: TypeAdapter[M] = TypeAdapter(message_type)
-        self.name = name or getattr(message_type, "__name__", "message")
+        self.name: str = name or str(getattr(message_type, "__name__", "message"))
         self.encoding = zenoh.Encoding.APPLICATION_JSON.with_schema(f"bevflow/{self.name}/v{SCHEMA_VERSION}")
 
     def encode(self, message: M) -> tuple[bytes, bytes | None, zenoh.Encoding]:
@@ -549,7 +555,8 @@ class Publication(Generic[M]):
         self._publisher.put(payload, encoding=self._codec.encoding)
 
     def has_subscribers(self) -> bool:
-        return self._publisher.matching_status.matching
+        # zenoh's stubs say bool; at run time it is a MatchingStatus with ``matching``.
+        return bool(self._publisher.matching_status.matching)  # type: ignore[attr-defined]
 
     def wait_for_subscribers(self, timeout: float) -> bool:
         """Whether a matching subscriber appeared within ``timeout`` seconds (declarations take a
@@ -629,6 +636,7 @@ class Subscription(Generic[M]):
         self.stats = stats if stats is not None else BusStats()
         self.window = window if window is not None else CaptureWindow.from_environment()
         self._on_message = on_message
+        self._subscriber: zenoh.Subscriber[None] | zenoh.ext.AdvancedSubscriber[None]
         self._subscriber = session.declare_subscriber(key, self._on_sample)
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
@@ -791,13 +799,14 @@ class HistorySubscription(Subscription[M]):
         self._session = session
         self._fetch_timeout_s = fetch_timeout_s
         self._fetches = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"history-{key}")
-        self._subscriber = zenoh.ext.declare_advanced_subscriber(
+        advanced = zenoh.ext.declare_advanced_subscriber(
             session, key, self._on_sample,
             history=zenoh.ext.HistoryConfig(detect_late_publishers=True),
             recovery=zenoh.ext.RecoveryConfig(heartbeat=True, periodic_queries=None),
         )
+        self._subscriber = advanced
         # Each publisher's liveliness token is also the key its cache answers on.
-        self._publishers = self._subscriber.detect_publishers(self._on_publisher, history=True)
+        self._publishers = advanced.detect_publishers(self._on_publisher, history=True)
 
     def _on_publisher(self, sample: zenoh.Sample) -> None:  # on a Zenoh thread
         if sample.kind == zenoh.SampleKind.PUT:

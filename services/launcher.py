@@ -17,8 +17,11 @@ import threading
 import time
 import urllib.error
 import urllib.request
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import FrameType
+from typing import Any
 
 
 _ports_handed_out: set[int] = set()
@@ -60,7 +63,7 @@ class ServiceGroup:
     log_dir: Path
     hub_port: int = field(default_factory=free_port)
     children: list[Child] = field(default_factory=list)
-    _sigterm_before: object = field(default=None, init=False, repr=False)
+    _sigterm_before: Callable[[int, FrameType | None], Any] | int | None = field(default=None, init=False, repr=False)
 
     def bus_args(self) -> list[str]:
         hub = f"tcp/127.0.0.1:{self.hub_port}"

@@ -19,6 +19,7 @@ import math
 import subprocess
 import sys
 import time
+from typing import Any
 
 import numpy as np
 
@@ -45,7 +46,7 @@ def sent_ns(message: bus.Frame | schemas.Tracks) -> int:
 def subscriber(args: argparse.Namespace) -> None:
     cfg = bus.BusConfig(mode=args.mode, connect=(args.endpoint,), shared_memory=args.shared_memory)
     session = bus.open_session(cfg)
-    codec = bus.FRAMES if args.kind == "frame" else bus.JsonCodec(schemas.Tracks)
+    codec: bus.Codec[Any] = bus.FRAMES if args.kind == "frame" else bus.JsonCodec(schemas.Tracks)  # per --kind
     key = KEYS.frame("*") if args.kind == "frame" else KEYS.tracks
     latencies: list[int] = []
 
@@ -87,7 +88,7 @@ def publish(args: argparse.Namespace, kind: str, endpoint: str, mode: str, sessi
     if not live.wait_until(bus.all_alive(["bench-sub"]), 20):
         child.kill()
         raise SystemExit("the subscriber process did not come up")
-    codec = bus.FRAMES if kind == "frame" else bus.JsonCodec(schemas.Tracks)
+    codec: bus.Codec[Any] = bus.FRAMES if kind == "frame" else bus.JsonCodec(schemas.Tracks)  # per --kind
     pub = bus.Publication(session, KEYS.frame("cam1") if kind == "frame" else KEYS.tracks, codec)
     if not pub.wait_for_subscribers(10):
         raise SystemExit("the subscriber never matched")
@@ -97,7 +98,7 @@ def publish(args: argparse.Namespace, kind: str, endpoint: str, mode: str, sessi
     for seq in range(args.count + args.warmup):
         if kind == "frame":
             header = schemas.FrameHeader(camera="cam1", seq=seq, capture_ns=time.time_ns(), width=SIZE, height=SIZE)
-            message = bus.Frame(header, image)
+            message: bus.Frame | schemas.Tracks = bus.Frame(header, image)
         else:
             message = small_message(seq)
         t0 = time.perf_counter()
@@ -143,6 +144,7 @@ def measure(argv: list[str] | None = None, echo: bool = False) -> dict[str, dict
     if args.via_router:
         router = subprocess.Popen([sys.executable, "-c", ROUTER, "--listen", endpoint],
                                   stdout=subprocess.PIPE, text=True)
+        assert router.stdout is not None  # a pipe was asked for
         router.stdout.readline()
         mode, cfg = "client", bus.BusConfig(mode="client", connect=(endpoint,), shared_memory=args.shared_memory)
     else:

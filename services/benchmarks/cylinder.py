@@ -16,6 +16,7 @@ noise, and silhouettes whose lower 30 % is hidden.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import time
@@ -24,7 +25,14 @@ from dataclasses import replace
 import numpy as np
 
 from bevflow.camera import Camera, FisheyeCamera, PinholeCamera, rotation_from_ypr
-from bevflow.cylinder import CylinderGrid, box_anchor, clear_lookup_cache, fit_cylinders, fit_cylinders_reference
+from bevflow.cylinder import (
+    CylinderGrid,
+    ProjectionMethod,
+    box_anchor,
+    clear_lookup_cache,
+    fit_cylinders,
+    fit_cylinders_reference,
+)
 from bevflow.detections import Boxes
 
 from bevflow_services.benchmarks.timing import time_calls
@@ -121,10 +129,10 @@ def bench_speed(camera_name: str, sizes: list[int], repeats: int, reference_repe
         start = time.perf_counter()
         fast = fit_cylinders(camera, boxes)
         cold_ms = (time.perf_counter() - start) * 1e3
-        batched = time_calls(lambda: fit_cylinders(camera, boxes), repeats)
+        batched = time_calls(functools.partial(fit_cylinders, camera, boxes), repeats)
         checked = min(n, reference_max_boxes or n)
         subset = boxes[:checked]
-        reference = time_calls(lambda: fit_cylinders_reference(camera, subset), reference_repeats)
+        reference = time_calls(functools.partial(fit_cylinders_reference, camera, subset), reference_repeats)
         slow, fast = reference.result, fast[:checked]
         both = np.isfinite(fast.xy).all(axis=1) & np.isfinite(slow.xy).all(axis=1)
         rows.append({
@@ -152,7 +160,7 @@ def format_speed(rows: list[dict]) -> list[str]:
     ]
 
 
-ESTIMATORS = {
+ESTIMATORS: dict[str, tuple[ProjectionMethod, CylinderGrid]] = {
     "bbox-center": ("bbox-center", CylinderGrid()),
     "nearest-point": ("nearest-point", CylinderGrid()),
     "cylinder, paper weights (IoU)": ("cylinder", CylinderGrid(weight_power=1.0)),

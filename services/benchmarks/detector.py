@@ -16,11 +16,13 @@ site's crowd, per camera and frame.
 
 from __future__ import annotations
 
+import functools
 import importlib.util
 import math
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -28,6 +30,9 @@ from bevflow.camera import FisheyeCamera
 from bevflow.detect.scaling import scaled_focal
 
 from bevflow_services.benchmarks.timing import percentile, time_calls
+
+if TYPE_CHECKING:  # the detector's module is loaded only when a model is timed
+    from bevflow.detect.runtime import Detector
 
 HEIGHTS_M = (3.3, 5.5, 8.1)
 THREADS = (1, 2)
@@ -56,8 +61,8 @@ def frame_for(height_m: float) -> tuple[np.ndarray, float]:
     try:
         from bevflow.detect.benchmark import rendered_frame
     except ImportError:
-        rendered_frame = None
-    if rendered_frame is not None:
+        pass
+    else:
         return rendered_frame(height_m)
     f = scaled_focal(height_m) * 1.5
     size = int(math.ceil(2 * f * math.radians(92.5)))
@@ -72,7 +77,7 @@ def bench_detector(
     threads: tuple[int, ...] = THREADS,
     repeats: int = 30,
     warmup: int = 3,
-    make_detector: Callable[[int, float], object] | None = None,
+    make_detector: Callable[[int, float], Detector] | None = None,
 ) -> dict:
     """One row per (height, threads): the model's input size and ms per frame, median and 90th
     percentile of wall-clock time (ONNX Runtime works on threads of its own, so the calling
@@ -84,7 +89,7 @@ def bench_detector(
             return {"available": False, "reason": reason, "rows": []}
         from bevflow.detect.runtime import DEFAULT_RANGES, Detector, DetectorBank
 
-        def make_detector(n: int, height: float) -> object:
+        def make_detector(n: int, height: float) -> Detector:
             return Detector(model, threads=n) if model is not None else DetectorBank(DEFAULT_RANGES, threads=n).for_height(height)
 
     rows = []
@@ -92,10 +97,10 @@ def bench_detector(
         frame, focal = frame_for(height)
         for n in threads:
             detector = make_detector(n, height)
-            shape = detector.prepare(frame, detector.scale_for(height, focal)).tensor.shape  # type: ignore[attr-defined]
+            shape = detector.prepare(frame, detector.scale_for(height, focal)).tensor.shape
             for _ in range(warmup):
-                detector.detect(frame, height, focal)  # type: ignore[attr-defined]
-            timing = time_calls(lambda: detector.detect(frame, height, focal), repeats)  # type: ignore[attr-defined]
+                detector.detect(frame, height, focal)
+            timing = time_calls(functools.partial(detector.detect, frame, height, focal), repeats)
             rows.append({
                 "height_m": height,
                 "threads": n,

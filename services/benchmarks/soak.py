@@ -159,7 +159,7 @@ def soak(minutes: float, cameras: int, people: int | None = None, sample_every_s
             session = bus.open_session(bus.BusConfig(mode="peer", listen=("tcp/127.0.0.1:0",),
                                                      connect=(f"tcp/127.0.0.1:{group.hub_port}",)))
             log = StreamLog()
-            subscriptions = [
+            subscriptions: list[bus.Subscription[Any]] = [
                 bus.subscribe(session, keys.detections("*"), bus.JsonCodec(Detections2D), log.on_detections),
                 bus.subscribe(session, keys.cylinders("*"), bus.JsonCodec(CameraCylinders), log.on_cylinders),
                 bus.subscribe(session, keys.truth, bus.JsonCodec(SimulatedTruth), log.on_truth),

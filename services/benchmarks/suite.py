@@ -232,7 +232,9 @@ def run_suite(settings: Settings, parts: tuple[str, ...] = PARTS, detector_model
             result["null_reasons"][key] = reason
         else:
             result["null_reasons"].pop(key, None)
-    return json_ready({**ordered, **result})
+    ready = json_ready({**ordered, **result})
+    assert isinstance(ready, dict)  # json_ready keeps a dict a dict
+    return ready
 
 
 def json_ready(value: object) -> object:

@@ -15,15 +15,18 @@ import statistics
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Generic, TypeVar
+
+R = TypeVar("R")
 
 
 @dataclass(frozen=True)
-class Timing:
+class Timing(Generic[R]):
     """Seconds of repeated calls, as lists (one entry per call), and what the last call returned."""
 
     wall_s: list[float]
     cpu_s: list[float]
-    result: object = None
+    result: R
 
     @property
     def wall_ms(self) -> float:
@@ -39,10 +42,9 @@ class Timing:
         return percentile([s * 1e3 for s in self.wall_s], q)
 
 
-def time_calls(call: Callable[[], object], repeats: int) -> Timing:
+def time_calls(call: Callable[[], R], repeats: int) -> Timing[R]:
     """Call ``call`` ``repeats`` times (at least once) and time each call."""
     wall, cpu = [], []
-    result = None
     for _ in range(max(repeats, 1)):
         start, start_cpu = time.perf_counter(), time.thread_time()
         result = call()

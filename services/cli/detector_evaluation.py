@@ -14,7 +14,7 @@ import json
 import math
 from pathlib import Path
 
-from bevflow.detect.tiles import RIM_TILES, load_rim_tiles
+from bevflow.detect.tiles import RIM_TILES, RimTileDetector, load_rim_tiles
 
 from bevflow_services.cli import UserError
 
@@ -62,6 +62,7 @@ def run_detector_evaluation(args: argparse.Namespace) -> int:
     _check(args)
     try:
         # Score every detection: AP needs the whole precision-recall curve.
+        detector: Detector | RimTileDetector
         if str(args.model) == RIM_TILES:
             detector = load_rim_tiles(threads=args.threads, score_threshold=0.05)
         else:

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import argparse
 import os
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 PREFIX = "BEVFLOW_"
@@ -50,7 +50,8 @@ def _value(action: argparse.Action, raw: str) -> Any:
         if isinstance(action, argparse.BooleanOptionalAction):
             return given
         return action.const if given else action.default
-    convert = action.type or str
+    # A type given by its registered name (a str) is not used by bevflow's commands.
+    convert: Callable[[str], Any] = action.type if callable(action.type) else str
     if isinstance(action, argparse._AppendAction):
         return [convert(part.strip()) for part in raw.split(",") if part.strip()]
     value = convert(raw)

@@ -32,7 +32,7 @@ import json
 import math
 from pathlib import Path
 
-from bevflow.cylinder import METHODS
+from bevflow.cylinder import METHODS, projection_method
 from bevflow.datasets.wildtrack import WildtrackError, load_wildtrack
 from bevflow.evaluation.detection import DetectionEvaluation, evaluate_detection
 from bevflow.evaluation.wildtrack_tracking import TrackingEvaluation, evaluate_tracking
@@ -175,7 +175,7 @@ def _run_dataset(args: argparse.Namespace, noise: DetectorNoise, methods: list[s
         raise UserError(f"--frames {args.frames} selects none of the {len(dataset.frames)} annotated frames")
     return [
         evaluate_tracking(dataset, detection=evaluate_detection(
-            dataset, method=m, noise=noise, seed=args.seed, frames=frames, fusion_distance_m=args.fusion_distance,
+            dataset, method=projection_method(m), noise=noise, seed=args.seed, frames=frames, fusion_distance_m=args.fusion_distance,
             clip_to_image=args.clip_to_image))
         for m in methods
     ]

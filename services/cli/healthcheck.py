@@ -19,6 +19,7 @@ import sys
 import urllib.error
 import urllib.request
 from pathlib import Path
+from typing import Any
 
 from bevflow_services import bus
 from bevflow_services.cli import UserError
@@ -143,8 +144,8 @@ def probe_argv(command: list[str]) -> list[str]:
     at = command.index("serve")
     service, rest = command[at + 1], command[at + 2:]
     seen = argparse.ArgumentParser(add_help=False, allow_abbrev=False)
-    for flags, kwargs in SERVE_FLAGS:
-        seen.add_argument(*flags, **kwargs)
+    for names, settings in SERVE_FLAGS:
+        seen.add_argument(*names, **settings)
     apply_environment(seen)  # the service read its BEVFLOW_* variables too; this runs with the same
     flags, _ = seen.parse_known_args(rest)
     if service == "router":
@@ -161,7 +162,7 @@ def probe_argv(command: list[str]) -> list[str]:
 
 
 # What probe_argv reads of a `bevflow serve` command line (the defaults are the services' own).
-SERVE_FLAGS = [
+SERVE_FLAGS: list[tuple[tuple[str, ...], dict[str, Any]]] = [
     (("--site",), {}),
     (("-m", "--mode"), {"default": "peer"}),
     (("-e", "--connect"), {"action": "append", "default": []}),

@@ -32,7 +32,9 @@ import cv2
 import numpy as np
 
 from bevflow.detect.providers import check_providers
+from bevflow.camera import Camera
 from bevflow.detect.runtime import Detector, DetectorError
+from bevflow.detect.tiles import RimTileDetector
 from bevflow.detect.window import detection_window, scaled_window
 from bevflow.detections import Boxes
 from bevflow.schemas import Detections2D, FrameHeader
@@ -78,7 +80,7 @@ class BadFrame(Exception):
 class FrameDetector:
     """The service's work, apart from the bus: one frame in, that camera's boxes out."""
 
-    def __init__(self, site: Site, detectors: dict[str, Detector], whole_frame: bool = False) -> None:
+    def __init__(self, site: Site, detectors: dict[str, Detector | RimTileDetector], whole_frame: bool = False) -> None:
         self.site = site
         self.detectors = detectors
         # Each camera's window around its reporting radius; the rest of the frame holds nobody
@@ -110,7 +112,7 @@ class FrameDetector:
         return Detections2D.from_boxes(camera_id, header.seq, header.capture_ns, Boxes(xyxy=xyxy, confidence=boxes.confidence))
 
 
-def _nadir_in_window(camera: object, sx: float, sy: float, x0: int, y0: int) -> tuple[float, float]:
+def _nadir_in_window(camera: Camera, sx: float, sy: float, x0: int, y0: int) -> tuple[float, float]:
     u, v = camera.nadir_pixel()
     return ((u + 0.5) * sx - 0.5 - x0, (v + 0.5) * sy - 0.5 - y0)
 

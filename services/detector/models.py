@@ -24,7 +24,15 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from bevflow.detect.providers import DEFAULT_PROVIDERS
-from bevflow.detect.runtime import DEFAULT_MODEL, DEFAULT_RANGES, Detector, DetectorBank, DetectorError, HeightRange
+from bevflow.detect.runtime import (
+    DEFAULT_MODEL,
+    DEFAULT_RANGES,
+    Detector,
+    DetectorBank,
+    DetectorError,
+    DetectorOptions,
+    HeightRange,
+)
 from bevflow.detect.tiles import RIM_TILES, TILE_MODEL, RimTileDetector
 from bevflow.site import Site
 
@@ -68,25 +76,28 @@ class CameraModels:
         providers: Sequence[str] = DEFAULT_PROVIDERS,
         load: type[Detector] = Detector,
     ) -> None:
-        options = {"score_threshold": score_threshold, "providers": providers}
+        options: DetectorOptions = {"score_threshold": score_threshold, "providers": providers}
         by_path: dict[Path, Detector] = {}
         tiles: list[RimTileDetector] = []  # one tile detector serves every camera that asks for it
 
-        def named(name: str | Path) -> Detector | RimTileDetector:
-            if str(name) == RIM_TILES:
-                if not tiles:  # YOLOX-nano on the tiles, the shipped general model under the camera
-                    tiles.append(RimTileDetector(load(TILE_MODEL, threads, **options), centre=named(DEFAULT_MODEL)))
-                return tiles[0]
+        def model(name: str | Path) -> Detector:
             path = resolve_model(name, site_dir).resolve()
             if path not in by_path:
                 by_path[path] = load(path, threads, **options)
             return by_path[path]
 
+        def named(name: str | Path) -> Detector | RimTileDetector:
+            if str(name) == RIM_TILES:
+                if not tiles:  # YOLOX-nano on the tiles, the shipped general model under the camera
+                    tiles.append(RimTileDetector(load(TILE_MODEL, threads, **options), centre=model(DEFAULT_MODEL)))
+                return tiles[0]
+            return model(name)
+
         if ranges is None:
             ranges = [HeightRange(r.min_height_m, r.max_height_m, r.model) for r in site.detectors or []] or DEFAULT_RANGES
         checked = DetectorBank(ranges).ranges  # sorted, refused if they overlap; loads nothing
 
-        def for_height(height_m: float) -> Detector:
+        def for_height(height_m: float) -> Detector | RimTileDetector:
             for r in checked:
                 if r.min_m <= height_m < r.max_m:
                     return named(r.model if r.model is not None else DEFAULT_MODEL)

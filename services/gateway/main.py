@@ -95,7 +95,7 @@ def bus_feed(session: Any, state: GatewayState, stats: BusStats) -> Any:
         subscriptions: list[AsyncSubscription[Any]] = [
             AsyncSubscription(session, keys.tracks, JsonCodec(Tracks), maxsize=QUEUES["tracks"], stats=stats),
             AsyncSubscription(session, keys.occupancy, JsonCodec(Occupancy), maxsize=QUEUES["occupancy"], stats=stats),
-            AsyncSubscription(session, keys.events, JsonCodec(Event, "Event"), maxsize=QUEUES["events"], stats=stats),
+            AsyncSubscription(session, keys.events, JsonCodec[Event](Event, "Event"), maxsize=QUEUES["events"], stats=stats),
             AsyncSubscription(session, keys.detections("*"), JsonCodec(Detections2D), maxsize=QUEUES["detections"], stats=stats),
             AsyncSubscription(session, keys.open_alerts, JsonCodec(OpenAlerts), maxsize=QUEUES["open_alerts"], stats=stats),
         ]

@@ -131,8 +131,8 @@ class SiteCollector(Collector):
         if health.tracks_age_s is not None:
             yield _value(_gauge("tracks_age_seconds", "seconds since the newest tracks message arrived"), health.tracks_age_s)
         services = _gauge("services_up", "live instances of each service (liveliness tokens)", ["service"])
-        for name, count in sorted(Counter(s.name for s in health.services).items()):
-            services.add_metric([name], count)
+        for service, count in sorted(Counter(s.name for s in health.services).items()):
+            services.add_metric([service], count)
         yield services
         yield _value(CounterMetricFamily(PREFIX + "ignored_messages", "messages refused: another site, an unknown "
                                          "camera, out of order"), health.ignored_messages)

@@ -8,7 +8,7 @@ zone or track (with the known ids), 422 (FastAPI's own) for a value of the wrong
 from __future__ import annotations
 
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from typing import Annotated, Generic, TypeVar
 
 from fastapi import Depends, HTTPException, Query
@@ -22,7 +22,7 @@ from bevflow_services.gateway.state import GatewayState
 T = TypeVar("T")
 NS = 1_000_000_000
 MAX_LIMIT = 1000
-EPOCH = datetime(1970, 1, 1, tzinfo=timezone.utc)
+EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
 
 
 def get_state(conn: HTTPConnection) -> GatewayState:
@@ -59,7 +59,7 @@ class Page(BaseModel, Generic[T]):
 def to_ns(moment: datetime) -> int:
     """A datetime as Unix nanoseconds; a naive datetime is taken as UTC."""
     if moment.tzinfo is None:
-        moment = moment.replace(tzinfo=timezone.utc)
+        moment = moment.replace(tzinfo=UTC)
     delta = moment - EPOCH
     return (delta.days * 86400 + delta.seconds) * NS + delta.microseconds * 1000
 

@@ -93,7 +93,7 @@ def triangulate(polygon: np.ndarray) -> np.ndarray:
             triangles += [(left[0], left[k], left[k + 1]) for k in range(1, len(left) - 1)]
             left = []
     if len(left) == 3:
-        triangles.append(tuple(left))
+        triangles.append((left[0], left[1], left[2]))
     return np.array(triangles, dtype=np.uint32).reshape(-1, 3)
 
 

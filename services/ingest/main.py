@@ -123,8 +123,9 @@ def simulate(session, keys: bus.Keys, site: Site, cameras: list[str], noise: Det
             boxes = frame.detections[site.camera_index(camera)]
             publications[camera].put(Detections2D.from_boxes(camera, frame.index, capture_ns, boxes))
         truth_out.put(simulated_truth(site, frame.index, capture_ns, truth))
-    for publication in [*publications.values(), truth_out]:
+    for publication in publications.values():
         publication.close()
+    truth_out.close()
 
 
 def simulate_frames(session, keys: bus.Keys, site: Site, cameras: list[str], args: argparse.Namespace,
@@ -153,8 +154,9 @@ def simulate_frames(session, keys: bus.Keys, site: Site, cameras: list[str], arg
             header = FrameHeader(camera=camera, seq=scene_frame.index // every, capture_ns=capture_ns, width=w, height=h)
             publications[camera].put(bus.Frame(header, image))
         truth_out.put(simulated_truth(site, scene_frame.index // every, capture_ns, truth))
-    for publication in [*publications.values(), truth_out]:
+    for publication in publications.values():
         publication.close()
+    truth_out.close()
 
 
 def in_real_time(feed: SimulatedFeed, stop, what: str, every: int = 1) -> Iterator[tuple[SceneFrame, GroundTruth]]:
@@ -192,11 +194,12 @@ def camera_frame_stride(scene_fps: float, camera_fps: float | None) -> int:
 
 
 def stream(session, keys: bus.Keys, site: Site, cameras: list[str], args: argparse.Namespace, stop) -> None:
-    sources = {c.id: c.source for c in site.cameras if c.id in cameras}
-    missing = sorted(c for c, s in sources.items() if not s)
+    configured = {c.id: c.source for c in site.cameras if c.id in cameras}
+    missing = sorted(c for c, s in configured.items() if not s)
     if missing:
         raise UserError(f"cameras {', '.join(missing)} have no 'source' in the site file; "
                         "give each a stream URL, video file or image folder, or run with --simulate")
+    sources = {c: s for c, s in configured.items() if s}
     readers = {c: LatestFrameReader(s, folder_fps=args.folder_fps).start() for c, s in sources.items()}
     publications = {c: bus.Publication(session, keys.frame(c), bus.FRAMES) for c in cameras}
     print(f"bevflow ingest: reading {len(cameras)} cameras of {site.site!r}", flush=True)

@@ -9,10 +9,12 @@ from __future__ import annotations
 
 import logging
 import threading
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from urllib.parse import urlsplit
 
 import paho.mqtt.client as mqtt
+from paho.mqtt.enums import CallbackAPIVersion
 
 from bevflow_services.redact import redact
 
@@ -43,7 +45,7 @@ class _Connection:
     def __init__(self, address: BrokerAddress, client_id: str) -> None:
         self.address = address
         self.connected = threading.Event()
-        self.client = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id=client_id)
+        self.client = mqtt.Client(CallbackAPIVersion.VERSION2, client_id=client_id)
         if address.user:
             self.client.username_pw_set(address.user, address.password)
         self.client.on_connect = self._on_connect
@@ -107,7 +109,7 @@ class Latest(_Connection):
     made while the broker is unreachable is dropped (the next one replaces it anyway).
     ``on_connect`` messages (Home Assistant discovery) are published again at every connection."""
 
-    def __init__(self, address: BrokerAddress, client_id: str, on_connect: list[tuple[str, bytes]] = ()) -> None:
+    def __init__(self, address: BrokerAddress, client_id: str, on_connect: Sequence[tuple[str, bytes]] = ()) -> None:
         self.announce = list(on_connect)
         super().__init__(address, client_id)
 

@@ -20,7 +20,10 @@ def discovery_messages(site: Site, site_id: str, topic_prefix: str, discovery_pr
     """(topic, payload) of every sensor's config, for ``topic_prefix``'s occupancy topics."""
     node = f"bevflow_{_safe(site_id)}"
     device = {"identifiers": [node], "name": f"bevflow {site_id}", "manufacturer": "bevflow"}
-    sensors = [("site", f"{site_id} occupancy", f"{topic_prefix}/{site_id}/occupancy", "{{ value_json.total }}")]
+    # (id, name, state topic, value template: None for a plain number)
+    sensors: list[tuple[str, str, str, str | None]] = [
+        ("site", f"{site_id} occupancy", f"{topic_prefix}/{site_id}/occupancy", "{{ value_json.total }}")
+    ]
     sensors += [(zone.id, f"{zone.name or zone.id} occupancy", f"{topic_prefix}/{site_id}/zones/{zone.id}/occupancy", None)
                 for zone in site.zones]
     messages = []

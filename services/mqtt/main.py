@@ -25,6 +25,7 @@ import argparse
 import logging
 import os
 from pathlib import Path
+from typing import Any
 
 from bevflow.schemas import FEED_EVENT_TYPES, EVENT_TYPES, AlertMessage, Event, Occupancy
 
@@ -103,8 +104,8 @@ def main(args: argparse.Namespace) -> int:
             latest.send(f"{prefix}/{site_id}/zones/{zone.id}/occupancy", str(zone.count).encode())
 
     session = bus.open_session(bus.config_from_args(args))
-    subscriptions = [
-        bus.HistorySubscription(session, keys.events, bus.JsonCodec(Event, "Event"), on_event),
+    subscriptions: list[bus.Subscription[Any]] = [
+        bus.HistorySubscription(session, keys.events, bus.JsonCodec[Event](Event, "Event"), on_event),
         bus.subscribe(session, keys.occupancy, bus.JsonCodec(Occupancy), on_occupancy),
     ]
     token = bus.announce(session, keys, SERVICE)

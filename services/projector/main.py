@@ -16,7 +16,7 @@ from __future__ import annotations
 import argparse
 import logging
 
-from bevflow.cylinder import METHODS
+from bevflow.cylinder import METHODS, projection_method
 from bevflow.live.projection import CameraProjection
 from bevflow.schemas import CameraCylinders, Detections2D
 from bevflow.site import Site
@@ -44,7 +44,7 @@ class Projector:
         self.site = site
         self.method = method
         self.unknown_cameras: set[str] = set()
-        self._projection = CameraProjection(site, method)
+        self._projection = CameraProjection(site, projection_method(method))
 
     def project(self, message: Detections2D) -> CameraCylinders | None:
         if message.camera not in self.site.built_cameras:

@@ -92,7 +92,7 @@ def main(args: argparse.Namespace) -> int:
     subscriptions: list[bus.Subscription] = [
         bus.subscribe(session, keys.occupancy, bus.JsonCodec(Occupancy), recorder.on_occupancy, stats=stats),
         bus.subscribe(session, keys.tracks, bus.JsonCodec(Tracks), recorder.on_tracks, stats=stats),
-        bus.HistorySubscription(session, keys.events, bus.JsonCodec(Event, "Event"), recorder.on_event, stats=stats),
+        bus.HistorySubscription(session, keys.events, bus.JsonCodec[Event](Event, "Event"), recorder.on_event, stats=stats),
         bus.subscribe(session, keys.open_alerts, bus.JsonCodec(OpenAlerts), recorder.on_open_alerts, stats=stats),
     ]
     token = bus.announce(session, keys, SERVICE)  # after subscribing: "alive" means "recording"

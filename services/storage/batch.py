@@ -15,11 +15,16 @@ does, so every track's samples share timestamps and contacts compare them withou
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TypeVar
 
 from bevflow.schemas import Event, Occupancy, Tracks
 
 from bevflow_services.storage.records import NS, SITE
+
+K = TypeVar("K")
+V = TypeVar("V")
 
 
 def _later_state(stored: Event | None, new: Event) -> Event:
@@ -81,14 +86,7 @@ class Batch:
         """Keep at most ``keep`` occupancy rows and as many positions, dropping the oldest; alerts
         are never dropped. For a database that stays down: memory must not grow without bound.
         Returns how many rows were dropped."""
-        dropped = 0
-        for table, time_of in ((self.occupancy, lambda k: k[0]), (self.points, lambda k: k[1])):
-            extra = len(table) - keep
-            if extra > 0:
-                for key in sorted(table, key=time_of)[:extra]:
-                    del table[key]
-                dropped += extra
-        return dropped
+        return _drop_oldest(self.occupancy, keep, lambda k: k[0]) + _drop_oldest(self.points, keep, lambda k: k[1])
 
 
 def _widen(table: dict, key: object, first: int, last: int) -> None:
@@ -111,3 +109,13 @@ class TrackSampler:
             return False
         self._last_bucket = bucket
         return True
+
+
+def _drop_oldest(table: dict[K, V], keep: int, time_of: Callable[[K], int]) -> int:
+    """Drop all but the ``keep`` latest rows of ``table``; how many went."""
+    extra = len(table) - keep
+    if extra <= 0:
+        return 0
+    for key in sorted(table, key=time_of)[:extra]:
+        del table[key]
+    return extra

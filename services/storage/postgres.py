@@ -36,7 +36,7 @@ DIALECT = Dialect(
 PASSWORD_FILE_VARIABLE = "BEVFLOW_DB_PASSWORD_FILE"
 
 
-def password_from_file(url: str, environ: Mapping[str, str] = os.environ) -> dict[str, str]:
+def password_from_file(url: str, environ: Mapping[str, str] = os.environ) -> dict[str, Any]:
     """``{"password": ...}`` read from the file ``BEVFLOW_DB_PASSWORD_FILE`` names, when it is
     set and ``url`` has no password of its own; ``{}`` otherwise (libpq's defaults then apply)."""
     path = environ.get(PASSWORD_FILE_VARIABLE)

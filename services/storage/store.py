@@ -213,9 +213,9 @@ class HistoryDatabase(Database):
                         limit: int = 100, offset: int = 0) -> tuple[list[TrackSummary], int]:
         """Tracks seen within [since_ns, until_ns] (in ``zone`` if given), newest first (by first
         sighting, then id): one page, and how many match in all."""
-        where, params = between("t.last_ns", since_ns, None)
+        lower, lower_params = between("t.last_ns", since_ns, None)
         upper, upper_params = between("t.first_ns", None, until_ns)
-        where, params = where + upper, params + upper_params
+        where, params = lower + upper, list[int | str]([*lower_params, *upper_params])
         if zone is not None:
             where.append("t.track_id IN (SELECT track_id FROM track_zones WHERE zone = ?)")
             params.append(zone)
@@ -325,7 +325,7 @@ def _pivot(rows: list[tuple[Any, ...]]) -> list[OccupancyPoint]:
     """(time_ns, step_s, zone, count) rows, ordered by time, as one point per time."""
     points: list[OccupancyPoint] = []
     current: tuple[int, int] | None = None
-    total, zones = 0, {}
+    total, zones = 0, dict[str, int]()
     for time_ns, step_s, zone, count in rows:
         key = (int(time_ns), int(step_s))
         if key[0] != (current[0] if current else None):

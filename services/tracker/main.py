@@ -179,7 +179,7 @@ def main(args: argparse.Namespace) -> int:
     stats = bus.BusStats()
     tracks_out = bus.Publication(session, keys.tracks, bus.JsonCodec(Tracks))
     occupancy_out = bus.Publication(session, keys.occupancy, bus.JsonCodec(Occupancy))
-    events_out = bus.CachedPublication(session, keys.events, bus.JsonCodec(Event, "Event"), cache=args.event_cache)
+    events_out = bus.CachedPublication(session, keys.events, bus.JsonCodec[Event](Event, "Event"), cache=args.event_cache)
     renewals_out = bus.Publication(session, keys.open_alerts, bus.JsonCodec(OpenAlerts))
     open_alerts = OpenAlertBook(site_id)
 
@@ -199,8 +199,8 @@ def main(args: argparse.Namespace) -> int:
                     now = time.time_ns()
                     ticks = assembler.pop_ready(now_ns=now)
                     health = watch.check(now)
-                for event in health:
-                    raise_alert(event)
+                for alert in health:
+                    raise_alert(alert)
                 for tick in ticks:
                     try:
                         with book.timed("tick_duration_seconds"):

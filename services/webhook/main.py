@@ -110,7 +110,7 @@ def main(args: argparse.Namespace) -> int:
 
     session = bus.open_session(bus.config_from_args(args))
     keys = bus.Keys(site_id)
-    events = bus.HistorySubscription(session, keys.events, bus.JsonCodec(Event, "Event"), on_event)
+    events = bus.HistorySubscription(session, keys.events, bus.JsonCodec[Event](Event, "Event"), on_event)
     token = bus.announce(session, keys, SERVICE)
     print(f"bevflow webhook: site {site_id!r} to {redact(args.url)}{'' if poster.secret else ' (unsigned)'}, "
           f"{outbox.backlog()} alerts waiting in {args.outbox}", flush=True)

@@ -27,7 +27,7 @@ from typing import Literal
 
 import cv2
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 Array = NDArray[np.float64]
 CameraKind = Literal["fisheye", "pinhole"]
@@ -47,7 +47,18 @@ def rotation_from_ypr(yaw_deg: float, pitch_deg: float, roll_deg: float) -> Arra
     rx = _rot_x(pitch)
     rr = _rot_z(roll)
     cam_to_world = rz @ down @ rx @ rr
-    return cam_to_world.T
+    rotation: Array = cam_to_world.T
+    return rotation
+
+
+def rotation_from_vector(rvec: ArrayLike) -> Array:
+    """The rotation matrix (3, 3) of a Rodrigues rotation vector (OpenCV's ``rvec``)."""
+    return np.asarray(cv2.Rodrigues(np.asarray(rvec, dtype=np.float64))[0], dtype=np.float64)
+
+
+def rotation_vector(R: ArrayLike) -> Array:
+    """The Rodrigues rotation vector (3,) of a rotation matrix: ``rotation_from_vector`` undone."""
+    return np.asarray(cv2.Rodrigues(np.asarray(R, dtype=np.float64))[0], dtype=np.float64).ravel()
 
 
 def _rot_z(a: float) -> Array:
@@ -89,7 +100,7 @@ class Camera:
 
     @property
     def rvec(self) -> Array:
-        return cv2.Rodrigues(self.R)[0].ravel()
+        return rotation_vector(self.R)
 
     def world_to_camera(self, points: Array) -> Array:
         return np.asarray(points, dtype=np.float64) @ self.R.T + self.t
@@ -100,7 +111,8 @@ class Camera:
         For a downward fisheye this is close to the image centre; for a side-view camera it lies far
         below the image, so "the box point nearest the nadir" becomes the box's bottom centre."""
         down_in_camera = self.R @ np.array([0.0, 0.0, -1.0])
-        return self.project_directions(down_in_camera[None, :])[0]
+        pixel: Array = self.project_directions(down_in_camera[None, :])[0]
+        return pixel
 
     # --- projection -----------------------------------------------------------------------------
     def project(self, points: Array) -> Array:
@@ -195,7 +207,8 @@ class FisheyeCamera(Camera):
     def distort_theta(self, theta: Array) -> Array:
         k1, k2, k3, k4 = self.dist
         t2 = theta * theta
-        return theta * (1.0 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))))
+        distorted: Array = theta * (1.0 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))))
+        return distorted
 
     def undistort_theta(self, theta_d: Array, iterations: int = 20) -> Array:
         """Invert θd = θ(1 + k1θ² + …) on [0, max_theta] by Newton's method, vectorised (OpenCV
@@ -317,18 +330,20 @@ class PinholeCamera(Camera):
         """As ``Camera.nadir_pixel``, but always finite: a tilted or level pinhole camera gets a
         point below its image (its undistorted vanishing point of verticals, or a far point)."""
         down = self.R @ np.array([0.0, 0.0, -1.0])
-        pixel = self.project_directions(down[None, :])[0]
+        pixel: Array = self.project_directions(down[None, :])[0]
         if np.isfinite(pixel).all():
             return pixel
         K = self.K
         if down[2] > 1e-9:
             # The vanishing point lies outside the calibrated field, where the distortion polynomial
             # means nothing; the undistorted projection is what "below the image" needs.
-            return (K @ (down / down[2]))[:2]
+            pixel = (K @ (down / down[2]))[:2]
+            return pixel
         # Level or upward-looking camera: verticals meet at infinity, so return a point far along
         # the image direction of "down".
         direction = K[:2, :2] @ down[:2]
-        return K[:2, 2] + 1e7 * direction / max(float(np.linalg.norm(direction)), 1e-12)
+        pixel = K[:2, 2] + 1e7 * direction / max(float(np.linalg.norm(direction)), 1e-12)
+        return pixel
 
 
 _UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-14)

@@ -92,7 +92,15 @@ from bevflow.detections import Boxes, Cylinders
 
 Array = NDArray[np.float64]
 ProjectionMethod = Literal["cylinder", "bbox-center", "nearest-point"]
-METHODS: tuple[str, ...] = ("cylinder", "bbox-center", "nearest-point")
+METHODS: tuple[ProjectionMethod, ...] = ("cylinder", "bbox-center", "nearest-point")
+
+
+def projection_method(name: str) -> ProjectionMethod:
+    """``name`` as one of ``METHODS``; ValueError naming them for any other."""
+    for method in METHODS:
+        if method == name:
+            return method
+    raise ValueError(f"unknown projection method {name!r}; choose one of {', '.join(METHODS)}")
 
 _DOWN_STEP_M = 0.05  # how far below a point on a pixel's ray to look for the image's "down"
 _TIE_TOLERANCE = 1e-5  # relative: top_k keeps candidates this close to the k-th best
@@ -157,7 +165,8 @@ def _image_down(camera: Camera, pixels: Array) -> Array:
     lower = points - np.array([0.0, 0.0, _DOWN_STEP_M])
     step = camera.project(lower) - camera.project(points)
     with np.errstate(invalid="ignore", divide="ignore"):
-        return step / np.linalg.norm(step, axis=1, keepdims=True)
+        down: Array = step / np.linalg.norm(step, axis=1, keepdims=True)
+        return down
 
 
 def _axis_ends(camera: Camera, xyxy: Array) -> tuple[Array, Array]:
@@ -246,7 +255,8 @@ class _RectTable:
                     self._fill(tiles[start : start + self.FILL_BATCH])
                 slots = self.slot_map[tx[:, :, None], ty[:, None, :]]
             rows = (slots * T + ux[:, :, None]) * T + uy[:, None, :]
-            return np.take(self.planes, rows.reshape(len(cells), -1), axis=1)
+            planes: NDArray[np.float32] = np.take(self.planes, rows.reshape(len(cells), -1), axis=1)
+            return planes
 
     def _fill(self, tiles: NDArray[np.int64]) -> None:
         T, local = self.TILE, np.arange(self.TILE)
@@ -276,7 +286,7 @@ class _RectTable:
         self.slot_map[tiles[:, 0], tiles[:, 1]] = first + np.arange(len(tiles))
 
 
-_TABLES: OrderedDict[tuple, _RectTable] = OrderedDict()
+_TABLES: OrderedDict[tuple[object, ...], _RectTable] = OrderedDict()
 _TABLES_LOCK = threading.Lock()
 _MAX_TABLES = 256
 
@@ -326,20 +336,23 @@ def _weights(iou: NDArray[np.float32], grid: CylinderGrid) -> NDArray[np.float32
     """(M, K) candidate weights: IoU ** weight_power, only the top_k kept (and any within
     _TIE_TOLERANCE of the k-th, so float32 rounding cannot make near-ties flip)."""
     p = grid.weight_power
-    if p == int(p):  # repeated squaring: several times faster than a float power
-        w, base, k = None, iou, int(p)
-        while k:
-            if k & 1:
-                w = base if w is None else w * base
-            k >>= 1
-            if k:
-                base = base * base
-    else:
-        w = iou**np.float32(p)
+    w = _whole_power(iou, int(p)) if p == int(p) else iou ** np.float32(p)
     if 0 < grid.top_k < w.shape[1]:
         kth = -np.partition(-w, grid.top_k - 1, axis=1)[:, grid.top_k - 1 : grid.top_k]
         w = np.where(w >= kth * np.float32(1.0 - _TIE_TOLERANCE), w, np.float32(0.0))
     return w
+
+
+def _whole_power(base: NDArray[np.float32], k: int) -> NDArray[np.float32]:
+    """``base ** k`` for a whole ``k >= 0`` by repeated squaring: several times faster than a float power."""
+    power: NDArray[np.float32] | None = None
+    while k:
+        if k & 1:
+            power = base if power is None else power * base
+        k >>= 1
+        if k:
+            base = base * base
+    return np.ones_like(base) if power is None else power
 
 
 @functools.lru_cache(maxsize=32)
@@ -369,7 +382,8 @@ def _feet_touch_nearer_box(
     with np.errstate(invalid="ignore"):
         nearer = run[None, :] < run[:, None]  # NaN (anchor off the floor) is never nearer
     np.fill_diagonal(touch, False)
-    return (touch & nearer).any(axis=1)
+    occluded: NDArray[np.bool_] = (touch & nearer).any(axis=1)
+    return occluded
 
 
 def _occlusion_test(
@@ -400,13 +414,15 @@ def _occlusion_test(
 
     def reach(r4: Array) -> Array:  # how far a rectangle extends along u
         centre, half = (r4[:, :2] + r4[:, 2:]) / 2.0, (r4[:, 2:] - r4[:, :2]) / 2.0
-        return (centre * u).sum(axis=1) + (half * np.abs(u)).sum(axis=1)
+        extent: Array = (centre * u).sum(axis=1) + (half * np.abs(u)).sum(axis=1)
+        return extent
 
     lowered = min(grid.touching_occlusion_ratio, grid.occlusion_ratio)
     ratio = np.where(steep, max(grid.occlusion_ratio, grid.rebuild_occlusion_ratio), grid.occlusion_ratio)
     threshold = np.where(touching, lowered, ratio) * length
     with np.errstate(invalid="ignore"):
-        return (length > 0) & (reach(rect) - reach(xyxy) > threshold)
+        occluded: NDArray[np.bool_] = (length > 0) & (reach(rect) - reach(xyxy) > threshold)
+        return occluded
 
 
 def _rebuild_from_head(camera: Camera, rim: Array, grid: CylinderGrid) -> Array:
@@ -416,7 +432,7 @@ def _rebuild_from_head(camera: Camera, rim: Array, grid: CylinderGrid) -> Array:
     away = rim - camera.center[:2]
     run = np.linalg.norm(away, axis=1, keepdims=True)
     with np.errstate(invalid="ignore", divide="ignore"):
-        feet = rim - np.nan_to_num(away / run) * grid.head_radius_m
+        feet: Array = rim - np.nan_to_num(away / run) * grid.head_radius_m
     feet[~_head_is_steep(camera, rim, grid)] = np.nan
     return feet
 
@@ -426,7 +442,8 @@ def _head_is_steep(camera: Camera, rim: Array, grid: CylinderGrid) -> NDArray[np
     the feet from (``max_head_slope``); False where it never reaches that height."""
     run = np.linalg.norm(rim - camera.center[:2], axis=1)
     with np.errstate(invalid="ignore"):
-        return run <= grid.max_head_slope * (camera.center[2] - grid.occluded_height_m)
+        steep: NDArray[np.bool_] = run <= grid.max_head_slope * (camera.center[2] - grid.occluded_height_m)
+        return steep
 
 
 def fit_cylinders(
@@ -542,7 +559,11 @@ def _touching_reference(camera: Camera, boxes: list[list[float]], grid: Cylinder
     return out
 
 
-def _fit_one_reference(camera: Camera, box: list[float], grid: CylinderGrid, touching: bool = False) -> tuple:
+# One reference fit: feet x, y, height, radius, score, occluded.
+_ReferenceFit = tuple[float, float, float, float, float, bool]
+
+
+def _fit_one_reference(camera: Camera, box: list[float], grid: CylinderGrid, touching: bool = False) -> _ReferenceFit:
     failed = (math.nan, math.nan, math.nan, math.nan, 0.0, False)
     near, far = _axis_ends_one(camera, box)
     ground = camera.pixels_to_plane(np.array([near]), 0.0)[0]
@@ -621,7 +642,9 @@ def _axis_ends_one(camera: Camera, box: list[float]) -> tuple[tuple[float, float
     return near, far
 
 
-def _cuboid_corners_one(x: float, y: float, height: float, radius: float, top_ratio: float) -> list[tuple[float, ...]]:
+def _cuboid_corners_one(
+    x: float, y: float, height: float, radius: float, top_ratio: float
+) -> list[tuple[float, float, float]]:
     corners = []
     for z, half in ((0.0, radius), (height, top_ratio * radius)):
         for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1)):
@@ -634,7 +657,10 @@ def _bounding_rect_one(camera: Camera, uv: list[list[float]]) -> list[float]:
         return [math.nan] * 4
     w, h = camera.image_size
     us, vs = [u for u, _ in uv], [v for _, v in uv]
-    clip = lambda value, high: min(max(value, 0.0), high)  # noqa: E731
+
+    def clip(value: float, high: float) -> float:
+        return min(max(value, 0.0), high)
+
     return [clip(min(us), w - 1.0), clip(min(vs), h - 1.0), clip(max(us), w - 1.0), clip(max(vs), h - 1.0)]
 
 

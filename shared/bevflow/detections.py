@@ -13,25 +13,30 @@ concatenate and hand to vectorised code.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
+from typing import Any, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
+# What selects rows of a column: one row, a slice, row numbers or a boolean mask.
+RowIndex = int | slice | list[int] | NDArray[np.integer[Any]] | NDArray[np.bool_]
+
+_Scalar = TypeVar("_Scalar", bound=np.generic)
 
 
-def _column(name: str, value: object, n: int, default: float, dtype: type) -> NDArray:
+def _column(name: str, value: ArrayLike | None, n: int, default: float, dtype: type[_Scalar]) -> NDArray[_Scalar]:
     if value is None:
         return np.full(n, default, dtype=dtype)
-    arr = np.asarray(value, dtype=dtype).reshape(-1)
+    arr: NDArray[_Scalar] = np.asarray(value, dtype=dtype).reshape(-1)
     if len(arr) != n:
         raise ValueError(f"{name}: column has {len(arr)} rows, expected {n}")
     return arr
 
 
-def _rows(name: str, value: object, width: int) -> FloatArray:
+def _rows(name: str, value: ArrayLike, width: int) -> FloatArray:
     """An (N, width) float array; an empty input is zero rows and a flat row of ``width`` is one.
     Anything else is refused rather than reshaped into wrong rows."""
     arr = np.asarray(value, dtype=np.float64)
@@ -44,7 +49,14 @@ def _rows(name: str, value: object, width: int) -> FloatArray:
     return arr
 
 
-@dataclass(frozen=True, eq=False)
+def _covariance(value: ArrayLike, n: int) -> FloatArray:
+    covariance = np.asarray(value, dtype=np.float64)
+    if covariance.shape != (n, 2, 2):
+        raise ValueError(f"covariance must have shape ({n}, 2, 2), got {covariance.shape}")
+    return covariance
+
+
+@dataclass(frozen=True, eq=False, init=False)
 class Boxes:
     """Axis-aligned boxes ``xyxy`` (N, 4) = (x0, y0, x1, y1) in pixels, with confidences.
 
@@ -52,12 +64,14 @@ class Boxes:
     ``corners()`` gives the 4 points back."""
 
     xyxy: FloatArray
-    confidence: FloatArray = field(default=None)  # type: ignore[assignment]
+    confidence: FloatArray
 
-    def __post_init__(self) -> None:
-        xyxy = _rows("xyxy", self.xyxy, 4)
-        object.__setattr__(self, "xyxy", xyxy)
-        object.__setattr__(self, "confidence", _column("confidence", self.confidence, len(xyxy), 1.0, np.float64))
+    # Written out rather than generated: the columns accept anything array-like (and None for
+    # the default) but always hold checked numpy arrays.
+    def __init__(self, xyxy: ArrayLike, confidence: ArrayLike | None = None) -> None:
+        rows = _rows("xyxy", xyxy, 4)
+        object.__setattr__(self, "xyxy", rows)
+        object.__setattr__(self, "confidence", _column("confidence", confidence, len(rows), 1.0, np.float64))
 
     @classmethod
     def empty(cls) -> Boxes:
@@ -66,7 +80,7 @@ class Boxes:
     def __len__(self) -> int:
         return len(self.xyxy)
 
-    def __getitem__(self, index: object) -> Boxes:
+    def __getitem__(self, index: RowIndex) -> Boxes:
         return Boxes(xyxy=self.xyxy[index].reshape(-1, 4), confidence=np.atleast_1d(self.confidence[index]))
 
     @property
@@ -96,7 +110,7 @@ class Boxes:
         return np.stack([np.stack([x0, y0], 1), np.stack([x1, y0], 1), np.stack([x1, y1], 1), np.stack([x0, y1], 1)], 1)
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, init=False)
 class Cylinders:
     """People as upright frustum-cylinders in world metres.
 
@@ -111,27 +125,33 @@ class Cylinders:
     so fusion need not). None when nobody said; a row of NaN where that row's is unknown."""
 
     xy: FloatArray
-    height: FloatArray = field(default=None)  # type: ignore[assignment]
-    radius: FloatArray = field(default=None)  # type: ignore[assignment]
-    camera: IntArray = field(default=None)  # type: ignore[assignment]
-    score: FloatArray = field(default=None)  # type: ignore[assignment]
-    occluded: NDArray[np.bool_] = field(default=None)  # type: ignore[assignment]
-    covariance: FloatArray | None = None
+    height: FloatArray
+    radius: FloatArray
+    camera: IntArray
+    score: FloatArray
+    occluded: NDArray[np.bool_]
+    covariance: FloatArray | None
 
-    def __post_init__(self) -> None:
-        xy = _rows("xy", self.xy, 2)
-        n = len(xy)
-        object.__setattr__(self, "xy", xy)
-        object.__setattr__(self, "height", _column("height", self.height, n, 1.7, np.float64))
-        object.__setattr__(self, "radius", _column("radius", self.radius, n, 0.3, np.float64))
-        object.__setattr__(self, "camera", _column("camera", self.camera, n, -1, np.int64))
-        object.__setattr__(self, "score", _column("score", self.score, n, 1.0, np.float64))
-        object.__setattr__(self, "occluded", _column("occluded", self.occluded, n, False, np.bool_))
-        if self.covariance is not None:
-            covariance = np.asarray(self.covariance, dtype=np.float64)
-            if covariance.shape != (n, 2, 2):
-                raise ValueError(f"covariance must have shape ({n}, 2, 2), got {covariance.shape}")
-            object.__setattr__(self, "covariance", covariance)
+    # Written out rather than generated, as for Boxes: any array-like in, checked arrays held.
+    def __init__(
+        self,
+        xy: ArrayLike,
+        height: ArrayLike | None = None,
+        radius: ArrayLike | None = None,
+        camera: ArrayLike | None = None,
+        score: ArrayLike | None = None,
+        occluded: ArrayLike | None = None,
+        covariance: ArrayLike | None = None,
+    ) -> None:
+        rows = _rows("xy", xy, 2)
+        n = len(rows)
+        object.__setattr__(self, "xy", rows)
+        object.__setattr__(self, "height", _column("height", height, n, 1.7, np.float64))
+        object.__setattr__(self, "radius", _column("radius", radius, n, 0.3, np.float64))
+        object.__setattr__(self, "camera", _column("camera", camera, n, -1, np.int64))
+        object.__setattr__(self, "score", _column("score", score, n, 1.0, np.float64))
+        object.__setattr__(self, "occluded", _column("occluded", occluded, n, False, np.bool_))
+        object.__setattr__(self, "covariance", None if covariance is None else _covariance(covariance, n))
 
     @classmethod
     def empty(cls) -> Cylinders:
@@ -140,7 +160,7 @@ class Cylinders:
     def __len__(self) -> int:
         return len(self.xy)
 
-    def __getitem__(self, index: object) -> Cylinders:
+    def __getitem__(self, index: RowIndex) -> Cylinders:
         return Cylinders(
             xy=self.xy[index].reshape(-1, 2),
             height=self.height[index],
@@ -160,7 +180,8 @@ class Cylinders:
         if radius_m is None:
             return np.ones(len(self), dtype=bool)
         distance = np.linalg.norm(self.xy - np.asarray(centre_xy, dtype=np.float64)[:2], axis=1)
-        return ~(distance > radius_m)
+        near: NDArray[np.bool_] = ~(distance > radius_m)
+        return near
 
     @staticmethod
     def merge(parts: list[Cylinders]) -> Cylinders:

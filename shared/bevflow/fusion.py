@@ -221,6 +221,9 @@ def _hidden_behind(
     """For each fused person, the person of several views they are a missed cut view of (module
     docstring, "Hidden views the occlusion test missed"), or −1."""
     into = np.full(len(fused), -1, dtype=np.int64)
+    covariance_of = fused.covariance
+    if covariance_of is None:  # the test weighs distances by the fused feet's covariances
+        return into
     several = np.flatnonzero(n_views >= 2)
     singles = np.flatnonzero((n_views == 1) & (fused.score > 0))
     if not len(several) or not len(singles):
@@ -233,7 +236,7 @@ def _hidden_behind(
         behind = several[~seen_by[several, camera]]
         along = (fused.xy[behind] - centres[k, :2]) @ sight
         offset = fused.xy[behind] - fused.xy[s]
-        covariance = fused.covariance[behind] + fused.covariance[s] + along_m**2 * np.outer(sight, sight)
+        covariance = covariance_of[behind] + covariance_of[s] + along_m**2 * np.outer(sight, sight)
         d2 = np.einsum("ni,nij,nj->n", offset, _inverse_2x2(covariance), offset)
         hides = (along > 0) & (along < run[k]) & (d2 < gate_chi2)
         if hides.any():
@@ -324,7 +327,7 @@ def _carried_or_computed_covariance(rows: Cylinders, cameras: Sequence[Camera], 
     if rows.covariance is None:
         return position_covariance(rows, cameras, noise)
     covariance = rows.covariance.copy()
-    missing = ~np.isfinite(covariance).all(axis=(1, 2))
+    missing: NDArray[np.bool_] = ~np.all(np.isfinite(covariance), axis=(1, 2))
     if missing.any():
         covariance[missing] = position_covariance(rows[missing], cameras, noise)
     return covariance
@@ -380,7 +383,8 @@ def _range_information(rows: Cylinders, cameras: Sequence[Camera]) -> FloatArray
     centres = _camera_centres(cameras, rows.camera)
     feet = np.concatenate([rows.xy, np.zeros((len(rows), 1))], axis=1)
     range_sq = np.maximum(((feet - centres) ** 2).sum(axis=1), 1e-6)
-    return (np.maximum(rows.score, 1e-6) / range_sq)[:, None, None] * np.eye(2)
+    covariance: FloatArray = (np.maximum(rows.score, 1e-6) / range_sq)[:, None, None] * np.eye(2)
+    return covariance
 
 
 def _group(
@@ -557,7 +561,8 @@ def _merge(
         """Per person, the sum of ``values`` (N, ...) over their rows (bincount: ufunc.at is slow)."""
         flat = values.reshape(len(values), -1)
         sums = [np.bincount(person, weights=flat[:, k], minlength=n_people) for k in range(flat.shape[1])]
-        return np.stack(sums, axis=1).reshape(n_people, *values.shape[1:])
+        # Weighted counts are floats; numpy's stubs type every bincount as integers.
+        return np.stack(sums, axis=1).astype(np.float64, copy=False).reshape(n_people, *values.shape[1:])
 
     total_info = total(info)
     moment = total(np.einsum("nij,nj->ni", info, rows.xy))

@@ -32,6 +32,7 @@ Ties go to the plan with the larger margin at the worst-covered point.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -119,7 +120,8 @@ class CameraPlan:
         u, v = np.meshgrid(np.arange(w), np.arange(h))
         floor = grid.pixels_to_world(np.stack([u.ravel(), v.ravel()], axis=1))[:, :2]
         d = np.linalg.norm(floor[:, None, :] - self.positions[None, :, :], axis=2)
-        return (d <= self.radius_m).sum(axis=1).reshape(h, w)
+        counts: NDArray[np.int64] = (d <= self.radius_m).sum(axis=1).reshape(h, w)
+        return counts
 
     def to_site(self, name: str = "site", image_size: tuple[int, int] = (1280, 1280)) -> Site:
         """A site file for the plan: nominal equidistant lenses (calibrate them once mounted),
@@ -211,7 +213,9 @@ def coverage_map(plan: CameraPlan, pixels_per_metre: float = 20.0, margin_m: flo
     return image
 
 
-def _legend(image: NDArray[np.uint8], plan: CameraPlan, grid: BevGrid, px) -> None:  # type: ignore[no-untyped-def]
+def _legend(
+    image: NDArray[np.uint8], plan: CameraPlan, grid: BevGrid, px: Callable[[tuple[float, float]], tuple[int, int]]
+) -> None:
     top = plan.depth_m + 1.6
     bar = 5.0 if plan.width_m >= 8 else 1.0
     a, b = px((0.0, top)), px((bar, top))

@@ -29,7 +29,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import cv2
 import numpy as np
@@ -271,9 +271,10 @@ class BevMosaic:
     @cached_property
     def fixed_point_maps(self) -> tuple[NDArray[np.int16], NDArray[np.uint16]]:
         """The same tables in OpenCV's fixed-point form (1/32 px), which remaps faster."""
-        return cv2.convertMaps(self.map_x, self.map_y, cv2.CV_16SC2)
+        xy, fraction = cv2.convertMaps(self.map_x, self.map_y, cv2.CV_16SC2)
+        return np.asarray(xy, dtype=np.int16), np.asarray(fraction, dtype=np.uint16)
 
-    def atlas(self, frames: Sequence[NDArray]) -> NDArray:
+    def atlas(self, frames: Sequence[NDArray[Any]]) -> NDArray[Any]:
         """The frames, one per camera in build order, copied into one image at ``offsets``."""
         if len(frames) != len(self.image_sizes):
             raise ValueError(f"expected {len(self.image_sizes)} frames, one per camera, got {len(frames)}")
@@ -292,18 +293,21 @@ class BevMosaic:
 
     def render(
         self,
-        frames: Sequence[NDArray],
+        frames: Sequence[NDArray[Any]],
         border_value: float = 0.0,
         interpolation: int = cv2.INTER_LINEAR,
         fixed_point: bool = True,
-    ) -> NDArray:
+    ) -> NDArray[Any]:
         """The bird's-eye view (h, w[, c]) of one frame per camera (in build order, same dtype and
         channels). Pixels no camera sees get ``border_value``. ``fixed_point`` uses the faster
         1/32-px tables; pass False for the exact float ones."""
-        maps = self.fixed_point_maps if fixed_point else (self.map_x, self.map_y)
+        map1, map2 = self.fixed_point_maps if fixed_point else (self.map_x, self.map_y)
         # A bare number would fill only the first channel: OpenCV reads it as Scalar(v, 0, 0, 0).
         border = (float(border_value),) * 4
-        return cv2.remap(self.atlas(frames), *maps, interpolation, borderMode=cv2.BORDER_CONSTANT, borderValue=border)
+        view: NDArray[Any] = cv2.remap(
+            self.atlas(frames), map1, map2, interpolation, borderMode=cv2.BORDER_CONSTANT, borderValue=border
+        )
+        return view
 
 
 # --- helpers --------------------------------------------------------------------------------------
@@ -327,10 +331,10 @@ def _shape(shape: tuple[int, ...]) -> str:
 
 
 def _per_camera(value: float | Sequence[float | None] | None, n: int) -> NDArray[np.float64]:
-    if value is None or np.isscalar(value):
-        values: list[float | None] = [value] * n  # type: ignore[list-item]
+    if value is None or isinstance(value, (int, float, np.number)):
+        values: list[float | None] = [None if value is None else float(value)] * n
     else:
-        values = list(value)  # type: ignore[arg-type]
+        values = list(value)
         if len(values) != n:
             raise ValueError(f"max_distance_m has {len(values)} values for {n} cameras")
     return np.array([np.inf if v is None else float(v) for v in values])

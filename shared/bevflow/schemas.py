@@ -10,10 +10,11 @@ nanoseconds since the Unix epoch (``*_ns``), pixel boxes as (x0, y0, x1, y1).
 
 from __future__ import annotations
 
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from typing import Annotated, Any, Literal, Protocol
 
 import numpy as np
+from numpy.typing import NDArray
 import orjson
 from pydantic import (
     BaseModel,
@@ -27,7 +28,7 @@ from pydantic import (
 
 from bevflow.detections import Boxes, Cylinders
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION: Literal[1] = 1
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Xy = tuple[Finite, Finite]
@@ -74,7 +75,7 @@ class Detections2D(Message):
             camera=camera,
             seq=seq,
             capture_ns=capture_ns,
-            boxes=[tuple(map(float, b)) for b in boxes.xyxy],
+            boxes=[(float(x0), float(y0), float(x1), float(y1)) for x0, y0, x1, y1 in boxes.xyxy],
             confidence=[float(c) for c in np.clip(boxes.confidence, 0.0, 1.0)],
         )
 
@@ -102,7 +103,7 @@ class CylinderEstimate(BaseModel):
     @model_serializer(mode="wrap")
     def _omit_absent_covariance(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
         # An estimate without one serialises as before the field existed.
-        out = handler(self)
+        out: dict[str, Any] = handler(self)
         if self.covariance is None:
             out.pop("covariance", None)
         return out
@@ -229,13 +230,18 @@ class Tracks(Message):
 
 class TrackColumns(Protocol):
     """What ``Tracks.wire_json`` reads of a tracker's table: ``id`` (N,), ``xy`` and ``velocity``
-    (N, 2), ``height`` and ``radius`` (N,)."""
+    (N, 2), ``height`` and ``radius`` (N,). Read-only: the tracker's table is frozen."""
 
-    id: np.ndarray
-    xy: np.ndarray
-    velocity: np.ndarray
-    height: np.ndarray
-    radius: np.ndarray
+    @property
+    def id(self) -> NDArray[np.int64]: ...
+    @property
+    def xy(self) -> NDArray[np.float64]: ...
+    @property
+    def velocity(self) -> NDArray[np.float64]: ...
+    @property
+    def height(self) -> NDArray[np.float64]: ...
+    @property
+    def radius(self) -> NDArray[np.float64]: ...
 
 
 class ZoneOccupancy(BaseModel):
@@ -442,7 +448,7 @@ def zones_named(message: BaseModel) -> set[str]:
 def iso_utc(time_ns: int) -> str:
     """``time_ns`` (nanoseconds since the Unix epoch) as ISO-8601 UTC with milliseconds and a ``Z``."""
     seconds, rest = divmod(int(time_ns), 1_000_000_000)
-    stamp = datetime.fromtimestamp(seconds, tz=timezone.utc).replace(microsecond=rest // 1000)
+    stamp = datetime.fromtimestamp(seconds, tz=UTC).replace(microsecond=rest // 1000)
     return stamp.isoformat(timespec="milliseconds").replace("+00:00", "Z")
 
 

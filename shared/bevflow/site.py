@@ -13,15 +13,16 @@ from __future__ import annotations
 import json
 import logging
 import math
+from collections.abc import Mapping
 from functools import cached_property
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, TypeVar
 
 import numpy as np
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator, model_validator
 
-from bevflow.camera import Camera, make_camera, rotation_from_ypr
+from bevflow.camera import Camera, make_camera, rotation_from_vector, rotation_from_ypr
 from bevflow.detect.providers import DEFAULT_PROVIDERS, check_providers
 
 log = logging.getLogger(__name__)
@@ -128,10 +129,8 @@ class CameraConfig(_Strict):
             R = rotation_from_ypr(p.yaw_deg, p.pitch_deg, p.roll_deg)
             t = -R @ np.asarray(p.position, dtype=np.float64)
         else:
-            import cv2
-
             assert self.extrinsics is not None
-            R = cv2.Rodrigues(np.asarray(self.extrinsics.rvec, dtype=np.float64))[0]
+            R = rotation_from_vector(self.extrinsics.rvec)
             t = np.asarray(self.extrinsics.tvec, dtype=np.float64)
         return make_camera(self.model, self.intrinsics.matrix(), np.asarray(self.distortion), R, t, self.image_size)
 
@@ -296,6 +295,10 @@ class DetectorRange(_Strict):
         return self
 
 
+# The lists of a site whose entries have ids of their own.
+_Identified = TypeVar("_Identified", "CameraConfig", "Zone")
+
+
 class Site(_Strict):
     site: Annotated[str, Field(min_length=1, pattern=r"^[A-Za-z0-9_.-]+$")] = "site"
     cameras: Annotated[list[CameraConfig], Field(min_length=1)]
@@ -336,7 +339,7 @@ class Site(_Strict):
 
     @field_validator("cameras", "zones")
     @classmethod
-    def _unique_ids(cls, items: list[CameraConfig] | list[Zone], info: ValidationInfo) -> list[Any]:
+    def _unique_ids(cls, items: list[_Identified], info: ValidationInfo) -> list[_Identified]:
         where: dict[str, list[int]] = {}
         for i, item in enumerate(items):
             where.setdefault(item.id, []).append(i)
@@ -371,7 +374,7 @@ class Site(_Strict):
         """Camera models by id, in file order; built once per site object."""
         return {c.id: c.build() for c in self.cameras}
 
-    def model_copy(self, *, update: dict[str, Any] | None = None, deep: bool = False) -> Site:
+    def model_copy(self, *, update: Mapping[str, Any] | None = None, deep: bool = False) -> Site:
         """As pydantic's, but without the cached camera models, which ``update`` may outdate."""
         copy = super().model_copy(update=update, deep=deep)
         for name in _CACHED:

@@ -234,7 +234,7 @@ SILHOUETTE_RADII = {
 }
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def silhouette_people(name: str) -> tuple[np.ndarray, Boxes]:
     cam = CAMERAS[name]
     truth, boxes = [], []

@@ -135,7 +135,8 @@ def test_the_feed_holds_still_under_the_pointer(page: Page, gateway: LiveGateway
     assert page.evaluate(alert_node("inc-while-hovered")) is None
     assert page.evaluate("document.querySelector('#alert-list li').dataset.id") == top
     assert page.evaluate(box) == before  # the item under the pointer did not move
-    assert page.evaluate("document.elementFromPoint(%f, %f).closest('li').dataset.id" % (where["x"], where["y"])) == "inc-1-2"
+    under_pointer = f"document.elementFromPoint({where['x']:f}, {where['y']:f}).closest('li').dataset.id"
+    assert page.evaluate(under_pointer) == "inc-1-2"
 
     map_centre = page.centre_of("#map")
     page.move_to(map_centre["x"], map_centre["y"])

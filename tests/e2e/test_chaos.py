@@ -246,12 +246,13 @@ def chaos(tmp_path_factory: pytest.TempPathFactory):
             time.sleep(1.0)  # alerts happen while every service is up, too
             killed_ns = time.time_ns()
             kill(children[service])
-            wait_until(lambda: not service_up(observer, service), 10, f"{service}'s token gone after the kill", group)
+            gone = f"{service}'s token gone after the kill"
+            wait_until(lambda service=service: not service_up(observer, service), 10, gone, group)
             time.sleep(0.5)
             children[service] = group.start(service, *args[service], name=f"{service}-restart-{k}")
-            wait_until(lambda: service_up(observer, service), 60, f"{service} back up", group)
+            wait_until(lambda service=service: service_up(observer, service), 60, f"{service} back up", group)
             restart = Restart(service, killed_ns, time.time_ns())
-            wait_until(lambda: recovery(poller.samples, observer, restart.up_ns, 2**63) is not None, 20,
+            wait_until(lambda restart=restart: recovery(poller.samples, observer, restart.up_ns, 2**63) is not None, 20,
                        f"occupancy recovering after {service} restarted", group)
             restarts.append(restart)
         forged_ns = forge(session, keys)

@@ -22,7 +22,7 @@ from pydantic import BaseModel, Field
 from bevflow.schemas import EVENT_TYPES, Event, iso_utc
 
 from bevflow_services.gateway.auth import AccessDep, Operator
-from bevflow_services.gateway.history import EventQuery, HistoryStore, OccupancySample
+from bevflow_services.gateway.history import HistoryStore, OccupancySample
 from bevflow_services.gateway.params import (
     NS,
     Offset,

@@ -10,7 +10,7 @@ with their durations, and charts of occupancy and violations (``daily_report``,
 from __future__ import annotations
 
 import re
-from datetime import date, datetime, timezone, tzinfo
+from datetime import UTC, date, datetime, tzinfo
 from typing import Annotated, Any, Literal
 from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
@@ -37,7 +37,7 @@ RESPONSES: dict[int | str, dict[str, Any]] = {200: {
 def time_zone(name: str) -> tzinfo:
     """The named IANA zone; 400 naming the parameter when it is unknown."""
     if name.upper() in ("UTC", "Z"):
-        return timezone.utc
+        return UTC
     try:
         return ZoneInfo(name)
     except (ZoneInfoNotFoundError, ValueError):

@@ -72,7 +72,7 @@ async def socket(websocket: WebSocket) -> None:
     except HTTPException as exc:
         await refuse(websocket, exc)
         return
-    except (OSError, asyncio.TimeoutError, websockets.InvalidHandshake):
+    except (TimeoutError, OSError, websockets.InvalidHandshake):
         await refuse(websocket, HTTPException(503, "the 3D view is not answering"))
         return
     async with upstream, audited_stream(websocket, "live_tracks"):

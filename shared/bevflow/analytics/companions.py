@@ -33,7 +33,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from bevflow.analytics.positions import NS_PER_S, seconds_to_ns
 
@@ -84,13 +84,14 @@ class Companions:
         pair = self._pairs.get((min(a, b), max(a, b)))
         return pair is not None and pair.companions is not False
 
-    def strangers(self, pairs: ArrayLike) -> np.ndarray:
+    def strangers(self, pairs: ArrayLike) -> NDArray[np.int64]:
         """The rows of (K, 2) ``pairs`` that are not companions."""
-        rows = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+        rows: NDArray[np.int64] = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
         if self.window_ns <= 0 or not len(rows):
             return rows
-        keep = [not self.are_companions(a, b) for a, b in rows.tolist()]
-        return rows[np.asarray(keep, dtype=bool)]
+        keep = np.array([not self.are_companions(a, b) for a, b in rows.tolist()], dtype=bool)
+        strangers: NDArray[np.int64] = rows[keep]
+        return strangers
 
     def _judge(self, t: int, present: set[int], close: set[tuple[int, int]]) -> None:
         for key in list(self._judging):

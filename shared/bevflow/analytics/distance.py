@@ -299,7 +299,8 @@ class DistanceMonitor:
 
     def _walking(self, pairs: _Pairs, t: int) -> NDArray[np.bool_]:
         """Pairs whose walking-together stretch is still going at ``t`` (within the grace)."""
-        return (pairs.walk_from_ns != NO_WALK) & (t - pairs.walk_last_ns <= self.walk_grace_ns)
+        walking: NDArray[np.bool_] = (pairs.walk_from_ns != NO_WALK) & (t - pairs.walk_last_ns <= self.walk_grace_ns)
+        return walking
 
     def _promote(self, pairs: _Pairs, t: int) -> tuple[_Pairs, _Pairs]:
         """Promote the pairs close long enough, or walking together long enough, in place; returns

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -36,11 +37,12 @@ from bevflow.schemas import DistanceIncident
 from bevflow.site import Thresholds, Zone
 
 # (people at once, seconds) from which an incident is of that severity; the first that applies wins.
-SEVERITY_RULES: tuple[tuple[str, int, float], ...] = (("high", 5, 300.0), ("medium", 3, 60.0))
+Severity = Literal["low", "medium", "high"]
+SEVERITY_RULES: tuple[tuple[Severity, int, float], ...] = (("high", 5, 300.0), ("medium", 3, 60.0))
 MAX_LISTED_TRACKS = 50  # ``tracks`` of a long incident with much id churn stays readable
 
 
-def severity(people: int, duration_s: float) -> str:
+def severity(people: int, duration_s: float) -> Severity:
     """"high", "medium" or "low" for a group of ``people`` (at most at once) lasting ``duration_s``.
 
     >>> severity(2, 10.0), severity(3, 10.0), severity(2, 90.0), severity(6, 10.0)
@@ -182,8 +184,8 @@ class IncidentTracker:
         np.minimum.at(closest, [group_of[p[0]] for p in known], np.hypot(*(xy[a] - xy[b]).T))
         people = [row[m] for members in components for m in members]
         which = np.repeat(np.arange(len(components)), [len(members) for members in components])
-        centre = np.stack([np.bincount(which, weights=xy[people, k]) for k in (0, 1)], axis=1)
-        centre /= np.bincount(which)[:, None]
+        summed = np.stack([np.bincount(which, weights=xy[people, k]) for k in (0, 1)], axis=1)
+        centre = summed / np.bincount(which)[:, None]
         return [_Group(frozenset(members), (cx, cy), d)
                 for members, (cx, cy), d in zip(components, centre.tolist(), closest.tolist())]
 
@@ -234,7 +236,7 @@ class IncidentTracker:
             limit_m=self.limit_m,
             position=c.centre,
             last_active_ns=last,
-            severity=level,  # type: ignore[arg-type]
+            severity=level,
             needs_acknowledgement=not short,
             raised_ns=raised_ns,
         )

@@ -123,8 +123,8 @@ def zone_lists(inside: BoolArray, zone_ids: Sequence[str]) -> list[list[str]]:
     packed = np.zeros((n, 8), np.uint8)
     packed[:, : (z + 7) // 8] = np.packbits(inside, axis=1)
     _, first, which = np.unique(packed.view(np.uint64).ravel(), return_index=True, return_inverse=True)
-    names = [[zone_ids[k] for k in np.flatnonzero(inside[row])] for row in first.tolist()]
-    return [list(names[k]) for k in which.reshape(-1).tolist()]
+    combinations = [[zone_ids[k] for k in np.flatnonzero(inside[row]).tolist()] for row in first.tolist()]
+    return [list(combinations[k]) for k in which.reshape(-1).tolist()]
 
 
 def zones_by_track(ids: IntArray, inside: BoolArray, zone_ids: Sequence[str]) -> dict[int, list[str]]:

@@ -71,7 +71,7 @@ class Chessboard:
         flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE | cv2.CALIB_CB_FAST_CHECK
         found, corners = cv2.findChessboardCorners(grey, self.pattern_size, flags=flags)
         if found:
-            window = self._subpix_window(corners.reshape(-1, 2))
+            window = self._subpix_window(np.asarray(corners, dtype=np.float64).reshape(-1, 2))
             refined = cv2.cornerSubPix(grey, corners.astype(np.float32), (window, window), (-1, -1), _SUBPIX_CRITERIA)
             return refined.reshape(-1, 2).astype(np.float64)
         # The sector-based detector copes better with the strong curvature near a fisheye's rim
@@ -115,7 +115,8 @@ class BoardRenderer:
         if noise_std > 0:
             rng = rng if rng is not None else np.random.default_rng()
             image = image + rng.normal(0.0, noise_std, image.shape)
-        return np.clip(np.rint(image), 0, 255).astype(np.uint8)
+        image8: Image = np.clip(np.rint(image), 0, 255).astype(np.uint8)
+        return image8
 
     def corners(self, R: Array, t: Array) -> Array:
         """Where the inner corners truly lie in the image (N, 2) for pose (R, t)."""
@@ -162,7 +163,8 @@ class BoardRenderer:
         grey = np.full(len(d), 128.0)
         grey[on_margin] = 235.0
         grey[on_squares & dark] = 20.0
-        return grey.reshape(v1 - v0, k, u1 - u0, k).mean(axis=(1, 3))
+        cells: Array = grey.reshape(v1 - v0, k, u1 - u0, k).mean(axis=(1, 3))
+        return cells
 
 
 def board_pose_facing(

@@ -123,7 +123,8 @@ def _centre(offsets: FloatArray, statistic: str) -> FloatArray:
     # Interquartile mean per component: as robust to a few wild samples as the median, less noisy.
     lo, hi = np.percentile(offsets, [25, 75], axis=0)
     inside = (offsets >= lo) & (offsets <= hi)
-    return (offsets * inside).sum(axis=0) / np.maximum(inside.sum(axis=0), 1)
+    mean: FloatArray = (offsets * inside).sum(axis=0) / np.maximum(inside.sum(axis=0), 1)
+    return mean
 
 
 @dataclass(frozen=True)

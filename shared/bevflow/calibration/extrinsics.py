@@ -32,7 +32,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import cv2
 import numpy as np
@@ -40,7 +40,7 @@ import yaml
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
-from bevflow.camera import Camera
+from bevflow.camera import Camera, rotation_from_vector, rotation_vector
 
 Array = NDArray[np.float64]
 
@@ -77,7 +77,7 @@ class PoseFit:
 
     @property
     def rvec(self) -> Array:
-        return cv2.Rodrigues(self.R)[0].ravel()
+        return rotation_vector(self.R)
 
     @property
     def center(self) -> Array:
@@ -194,7 +194,7 @@ def estimate_pose(camera: Camera, points: Correspondences) -> PoseFit:
             best = (cost, rvec, tvec)
     if best is None:
         raise ExtrinsicsError("no starting pose could be found from these points; check that pixels and world points match")
-    R = cv2.Rodrigues(best[1])[0]
+    R = rotation_from_vector(best[1])
     return _fit(camera, points, R, best[2])
 
 
@@ -245,12 +245,12 @@ def _initial_poses(rays: Array, world: Array) -> list[tuple[Array, Array]]:
         except cv2.error:
             continue
         if ok and np.isfinite(rvec).all() and np.isfinite(tvec).all():
-            poses.append((rvec.ravel(), tvec.ravel()))
+            poses.append((np.asarray(rvec, dtype=np.float64).ravel(), np.asarray(tvec, dtype=np.float64).ravel()))
     return poses
 
 
 def _residuals(params: Array, camera: Camera, points: Correspondences) -> Array:
-    R = cv2.Rodrigues(params[:3])[0]
+    R = rotation_from_vector(params[:3])
     projected = camera.with_pose(R, params[3:]).project(points.world)
     # A point the trial pose cannot see gets a large, smooth penalty instead of NaN.
     return np.nan_to_num(projected - points.pixels, nan=1e4).ravel()
@@ -258,7 +258,7 @@ def _residuals(params: Array, camera: Camera, points: Correspondences) -> Array:
 
 def _refine(camera: Camera, points: Correspondences, rvec: Array, tvec: Array) -> tuple[Array, Array]:
     start = np.concatenate([rvec, tvec])
-    method = "lm" if 2 * len(points) >= 6 else "trf"
+    method: Literal["lm", "trf"] = "lm" if 2 * len(points) >= 6 else "trf"
     solution = least_squares(_residuals, start, args=(camera, points), method=method, x_scale="jac")
     return solution.x[:3], solution.x[3:]
 

@@ -84,7 +84,7 @@ def render_floor_grid(
 def _polyline(image: Image, camera: Camera, floor_xy: NDArray[np.float64], colour: tuple[int, int, int], thickness: int) -> None:
     """Draw the floor path through the camera, broken where the camera does not see it."""
     pixels = camera.project(np.column_stack([floor_xy, np.zeros(len(floor_xy))]))
-    seen = np.isfinite(pixels).all(axis=1)
+    seen: NDArray[np.bool_] = np.all(np.isfinite(pixels), axis=1)
     runs = np.split(np.arange(len(pixels)), np.flatnonzero(np.diff(seen.astype(np.int8))) + 1)
     for run in runs:
         if len(run) >= 2 and seen[run[0]]:

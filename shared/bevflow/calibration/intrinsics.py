@@ -169,7 +169,7 @@ def _solve_fisheye(
             for r, t, v in zip(rvecs, tvecs, views, strict=True)
         ]
     )
-    return K, D, per_view
+    return np.asarray(K, dtype=np.float64), np.asarray(D, dtype=np.float64), per_view
 
 
 def _starts_alone(view: BoardView, board: Chessboard, image_size: tuple[int, int], K0: Array) -> bool:
@@ -197,7 +197,7 @@ def _solve_pinhole(views: list[BoardView], board: Chessboard, image_size: tuple[
             for r, t, v in zip(rvecs, tvecs, views, strict=True)
         ]
     )
-    return K, D, per_view
+    return np.asarray(K, dtype=np.float64), np.asarray(D, dtype=np.float64), per_view
 
 
 def _ill_conditioned_view(message: str) -> int | None:

@@ -12,12 +12,16 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from bevflow.camera import Camera
 from bevflow.cylinder import fit_cylinders
 from bevflow.detections import Cylinders
 from bevflow.schemas import CameraCylinders
 from bevflow.site import Site
+
+if TYPE_CHECKING:  # a protocol only: the evaluation modules are not loaded for a check
+    from bevflow.evaluation.detection import AnnotatedDataset
 
 Frame = dict[int, Cylinders]
 
@@ -31,7 +35,7 @@ class CheckSource:
     frames: Iterable[Frame]
 
 
-def dataset_source(dataset, site: Site | None = None, frames: int | None = None) -> CheckSource:  # type: ignore[no-untyped-def]
+def dataset_source(dataset: AnnotatedDataset, site: Site | None = None, frames: int | None = None) -> CheckSource:
     """A WILDTRACK-like dataset (``camera_ids``, ``cameras``, ``frames`` with ``views``); with
     ``site``, its cameras of the same ids replace the dataset's own calibration."""
     ids = list(dataset.camera_ids)

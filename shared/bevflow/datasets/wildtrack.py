@@ -39,11 +39,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from bevflow.camera import PinholeCamera
+from bevflow.camera import PinholeCamera, rotation_from_vector
 from bevflow.detections import Boxes
 
 FloatArray = NDArray[np.float64]
@@ -161,7 +160,7 @@ def load_camera(calibrations: Path, name: str) -> PinholeCamera:
     dist = _xml_numbers(intrinsic, "distortion_coefficients/data", None)
     if dist.size not in (4, 5, 8):
         raise WildtrackError(f"{intrinsic}: distortion_coefficients has {dist.size} numbers, expected 4, 5 or 8")
-    R = cv2.Rodrigues(rvec)[0]
+    R = rotation_from_vector(rvec)
     return PinholeCamera(K=K, dist=dist, R=R, t=tvec_cm / 100.0, image_size=IMAGE_SIZE)
 
 

@@ -15,11 +15,12 @@ import time
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import NDArray
 
 from bevflow.camera import FisheyeCamera
 from bevflow.detect.runtime import Detector
 from bevflow.detect.scaling import scaled_focal
-from bevflow.detect.tiles import RIM_TILES, load_rim_tiles
+from bevflow.detect.tiles import RIM_TILES, RimTileDetector, load_rim_tiles
 from bevflow.sim.bodies import BodyShape, pose_bodies
 from bevflow.sim.render import FisheyeRenderer, Room
 
@@ -62,7 +63,9 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def _detector(model: Path | None, threads: int, frame: np.ndarray, height: float, focal: float) -> tuple[object, str]:
+def _detector(
+    model: Path | None, threads: int, frame: NDArray[np.uint8], height: float, focal: float
+) -> tuple[Detector | RimTileDetector, str]:
     """The detector to time and a description of its input."""
     if str(model) == RIM_TILES:
         tiles = load_rim_tiles(threads=threads)

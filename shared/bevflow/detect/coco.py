@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -86,11 +87,12 @@ def rotated_to_xyxy(rotated: FloatArray) -> FloatArray:
 
 
 
-def write_coco(path: Path, images: list[dict], boxes: list[FloatArray]) -> None:
+def write_coco(path: Path, images: list[dict[str, Any]], boxes: list[FloatArray]) -> None:
     """Write axis-aligned person boxes (one (N, 4) xyxy array per image) as COCO JSON. ``images``
     are COCO image entries (``file_name``, ``width``, ``height``, optional extras); ids are
     assigned in order."""
-    out_images, annotations = [], []
+    out_images: list[dict[str, Any]] = []
+    annotations: list[dict[str, Any]] = []
     for i, (im, xyxy) in enumerate(zip(images, boxes, strict=True), start=1):
         out_images.append({"id": i, **im})
         for x0, y0, x1, y1 in np.asarray(xyxy, dtype=np.float64).reshape(-1, 4):

@@ -126,7 +126,7 @@ def yolox_grid(input_hw: tuple[int, int], strides: Sequence[int] = YOLOX_STRIDES
     return np.concatenate(cells).astype(np.float64), np.concatenate(per_row)
 
 
-def guess_format(output_shapes: Sequence[Sequence[int]], input_hw: tuple[int, int]) -> str:
+def guess_format(output_shapes: Sequence[Sequence[int | str | None]], input_hw: tuple[int, int]) -> str:
     """The layout of a model's outputs: three outputs are the project's own model; one output
     whose middle axis is shorter than its last is YOLOv8-style; otherwise the row count tells
     YOLOX (one row per cell of strides 8/16/32) from YOLOv5 (three anchors per cell); one output

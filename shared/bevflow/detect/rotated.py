@@ -57,8 +57,11 @@ def _signed_area(pts: list[tuple[float, float]]) -> float:
 
 def convex_intersection(subject: FloatArray, clip: FloatArray) -> FloatArray:
     """The intersection of two convex polygons (K, 2), as a polygon (possibly empty)."""
-    as_list = lambda a: [(float(x), float(y)) for x, y in np.asarray(a, np.float64).reshape(-1, 2)]  # noqa: E731
-    return np.array(_clip(as_list(subject), as_list(clip)), dtype=np.float64).reshape(-1, 2)
+    return np.array(_clip(_points(subject), _points(clip)), dtype=np.float64).reshape(-1, 2)
+
+
+def _points(polygon: FloatArray) -> list[tuple[float, float]]:
+    return [(float(x), float(y)) for x, y in np.asarray(polygon, np.float64).reshape(-1, 2)]
 
 
 def _clip(out: list[tuple[float, float]], clip: list[tuple[float, float]]) -> list[tuple[float, float]]:

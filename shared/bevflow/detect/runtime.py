@@ -21,6 +21,7 @@ import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, Protocol, TypedDict, Unpack
 
 import cv2
 import numpy as np
@@ -35,6 +36,25 @@ _log = logging.getLogger(__name__)
 DEFAULT_MODEL = Path(__file__).resolve().parent.parent / "data" / "models" / "bevflow-person-centernet.onnx"
 PAD_MULTIPLE = 32
 LETTERBOX_GREY = 114
+
+
+class ModelPort(Protocol):
+    """One of a model's inputs or outputs as ONNX Runtime describes it: a dimension is a number
+    when fixed, a name or None when dynamic."""
+
+    @property
+    def name(self) -> str: ...
+    @property
+    def shape(self) -> Sequence[int | str | None]: ...
+
+
+class InferenceSession(Protocol):
+    """What the detector uses of an ONNX Runtime session: tests, or a session built with other
+    execution providers, can stand in for it."""
+
+    def get_inputs(self) -> Sequence[ModelPort]: ...
+    def get_outputs(self) -> Sequence[ModelPort]: ...
+    def run(self, output_names: list[str] | None, input_feed: dict[str, NDArray[Any]]) -> list[NDArray[Any]]: ...
 
 
 class DetectorError(RuntimeError):
@@ -74,7 +94,7 @@ class Detector:
         person_class: int = 0,
         rgb: bool | None = None,
         input_scale: float | None = None,
-        session: object | None = None,
+        session: InferenceSession | None = None,
         providers: Sequence[str] = DEFAULT_PROVIDERS,
     ) -> None:
         self.model_path = Path(model_path) if model_path is not None else DEFAULT_MODEL
@@ -144,7 +164,8 @@ class Detector:
             th, tw = self.fixed_hw
         sw, sh = max(int(round(w * scale)), 1), max(int(round(h * scale)), 1)
         if (sw, sh) != (w, h):
-            image = cv2.resize(image, (sw, sh), interpolation=cv2.INTER_AREA if scale < 1 else cv2.INTER_LINEAR)
+            interpolation = cv2.INTER_AREA if scale < 1 else cv2.INTER_LINEAR
+            image = np.asarray(cv2.resize(image, (sw, sh), interpolation=interpolation), dtype=np.uint8)
         if self.fixed_hw is None:
             th, tw = -(-sh // PAD_MULTIPLE) * PAD_MULTIPLE, -(-sw // PAD_MULTIPLE) * PAD_MULTIPLE
             pad, fill = (0, 0), 0
@@ -183,7 +204,7 @@ class Detector:
         return Boxes(xyxy=xyxy, confidence=scores)
 
 
-def _load_session(path: Path, threads: int, providers: Sequence[str] = DEFAULT_PROVIDERS) -> object:
+def _load_session(path: Path, threads: int, providers: Sequence[str] = DEFAULT_PROVIDERS) -> InferenceSession:
     import onnxruntime as ort  # imported here so the rest of the core library loads without it
 
     plan = plan_providers(providers, ort.get_available_providers())
@@ -200,12 +221,13 @@ def _load_session(path: Path, threads: int, providers: Sequence[str] = DEFAULT_P
     # per frame with 2 threads and made each frame slower, not faster.
     options.add_session_config_entry("session.intra_op.allow_spinning", "0")
     try:
-        return ort.InferenceSession(str(path), options, providers=plan.use)
+        session: InferenceSession = ort.InferenceSession(str(path), options, providers=plan.use)
+        return session
     except Exception as exc:  # onnxruntime raises its own exception types
         raise DetectorError(f"cannot load detector model {path}: {exc}") from None
 
 
-def _model_zoom(session: object) -> float:
+def _model_zoom(session: InferenceSession) -> float:
     meta = getattr(session, "get_modelmeta", None)  # test doubles may have none
     value = meta().custom_metadata_map.get(ZOOM_METADATA_KEY, "1") if meta is not None else "1"
     try:
@@ -226,11 +248,23 @@ class HeightRange:
     model: str | Path | None = None
 
 
+class DetectorOptions(TypedDict, total=False):
+    """``Detector``'s settings other than the model and threads, as ``DetectorBank`` passes them on."""
+
+    score_threshold: float
+    nms_iou: float
+    model_format: str
+    person_class: int
+    rgb: bool | None
+    input_scale: float | None
+    providers: Sequence[str]
+
+
 class DetectorBank:
     """One detector per mounting-height range; ranges must not overlap. Detectors load lazily,
     so a site whose cameras are all in one range loads one model."""
 
-    def __init__(self, ranges: Sequence[HeightRange], threads: int = 2, **options: object) -> None:
+    def __init__(self, ranges: Sequence[HeightRange], threads: int = 2, **options: Unpack[DetectorOptions]) -> None:
         ordered = sorted(ranges, key=lambda r: r.min_m)
         for a, b in zip(ordered, ordered[1:], strict=False):
             if b.min_m < a.max_m:
@@ -246,7 +280,7 @@ class DetectorBank:
         for i, r in enumerate(self.ranges):
             if r.min_m <= camera_height_m < r.max_m:
                 if i not in self._loaded:
-                    self._loaded[i] = Detector(r.model, self.threads, **self.options)  # type: ignore[arg-type]
+                    self._loaded[i] = Detector(r.model, self.threads, **self.options)
                 return self._loaded[i]
         spans = ", ".join(f"[{r.min_m}, {r.max_m})" for r in self.ranges)
         raise ValueError(f"no detector model covers a camera {camera_height_m} m high (ranges: {spans})")

@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -39,6 +40,9 @@ from bevflow.detect.circle import DEFAULT_FIELD_OF_VIEW_DEG
 from bevflow.detect.coco import rotated_to_xyxy
 from bevflow.detect.rotated import radial_boxes, rotated_iou_matrix
 from bevflow.detections import Boxes
+
+if TYPE_CHECKING:  # loaded only when a model loads, as in load_rim_tiles
+    from bevflow.detect.runtime import Detector
 
 FloatArray = NDArray[np.float64]
 EDGE_PX = 2.0  # a box this close to a tile's side edge is cut by it
@@ -60,7 +64,7 @@ class RimTileDetector:
     FastestDet). ``centre``: optional detector (with ``detect(image, height, focal)``) for the
     people right under the camera."""
 
-    def __init__(self, tile_detector: object, layout: TileLayout = TileLayout(), centre: object | None = None,
+    def __init__(self, tile_detector: Detector, layout: TileLayout = TileLayout(), centre: Detector | None = None,
                  centre_share: float = 0.3, field_of_view_deg: float = DEFAULT_FIELD_OF_VIEW_DEG) -> None:  # fmt: skip
         hw = getattr(tile_detector, "fixed_hw", None)
         if hw is None or hw[0] != hw[1]:
@@ -108,7 +112,7 @@ class RimTileDetector:
             offset = np.array([n / 2, n + lay.start_share * radius * k])  # the centre, below the tile
             m = np.hstack([scale * back.T, (offset - scale * back.T @ c)[:, None]])
             tile = cv2.warpAffine(small, m, (n, n), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
-            boxes = self.tile_detector.detect_scaled(tile, 1.0)
+            boxes = self.tile_detector.detect_scaled(np.asarray(tile, dtype=np.uint8), 1.0)
             x = boxes.xyxy
             whole = (x[:, 0] > EDGE_PX) & (x[:, 2] < n - 1 - EDGE_PX)
             x, conf = x[whole], boxes.confidence[whole]

@@ -33,13 +33,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
-from typing import Protocol
+from typing import Any, Protocol, TypedDict
 
 import numpy as np
 from numpy.typing import NDArray
 
 from bevflow.camera import Camera
-from bevflow.cylinder import CylinderGrid, fit_cylinders
+from bevflow.cylinder import CylinderGrid, ProjectionMethod, fit_cylinders
 from bevflow.detections import Boxes, Cylinders
 from bevflow.fusion import PositionNoise, fuse_cylinders
 from bevflow.metrics.detection import DetectionScores, score_detections
@@ -52,17 +52,24 @@ IntArray = NDArray[np.int64]
 
 class AnnotatedView(Protocol):
     """One camera's boxes in one frame and whose they are. A view may also carry ``visible_xyxy``
-    (N, 4), the visible extent of each box, which the noise model then uses for truncation."""
+    (N, 4), the visible extent of each box, which the noise model then uses for truncation.
+    The protocols here are read-only: datasets are frozen."""
 
-    boxes: Boxes
-    person_ids: IntArray
+    @property
+    def boxes(self) -> Boxes: ...
+    @property
+    def person_ids(self) -> IntArray: ...
 
 
 class AnnotatedFrame(Protocol):
-    frame: int
-    person_ids: IntArray
-    feet_xy: FloatArray
-    views: Sequence[AnnotatedView]
+    @property
+    def frame(self) -> int: ...
+    @property
+    def person_ids(self) -> IntArray: ...
+    @property
+    def feet_xy(self) -> FloatArray: ...
+    @property
+    def views(self) -> Sequence[AnnotatedView]: ...
 
 
 class Area(Protocol):
@@ -72,10 +79,14 @@ class Area(Protocol):
 class AnnotatedDataset(Protocol):
     """What an evaluation needs; ``bevflow.datasets.wildtrack.WildtrackDataset`` is one."""
 
-    camera_ids: Sequence[str]
-    cameras: Sequence[Camera]
-    frames: Sequence[AnnotatedFrame]
-    area: Area
+    @property
+    def camera_ids(self) -> Sequence[str]: ...
+    @property
+    def cameras(self) -> Sequence[Camera]: ...
+    @property
+    def frames(self) -> Sequence[AnnotatedFrame]: ...
+    @property
+    def area(self) -> Area: ...
 
 
 @dataclass(frozen=True)
@@ -94,11 +105,19 @@ class CameraCounts:
     outside_area: int  # placed, but outside the annotated area
     alone: DetectionScores  # this camera's cylinders in the area against the people it sees
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, Any]:
         out = asdict(self)
         out["alone"] = self.alone.as_dict()
         return out
 
+
+
+def _camera_counts(camera_id: str, counts: NDArray[np.int64], alone: DetectionScores) -> CameraCounts:
+    """``counts``: the CameraCounts fields from boxes to outside_area, in order."""
+    boxes, detections, dropped, truncated, false_positives, clipped, unplaced, weak, outside_area = counts.tolist()
+    return CameraCounts(
+        camera_id, boxes, detections, dropped, truncated, false_positives, clipped, unplaced, weak, outside_area, alone
+    )
 
 @dataclass(frozen=True)
 class DetectionEvaluation:
@@ -121,7 +140,7 @@ class DetectionEvaluation:
     sightings: tuple[Cylinders, ...] = field(default=(), repr=False, compare=False)
     """Every evaluated frame's ``Fusion.sightings`` (weak views that placed nobody)."""
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, Any]:
         """JSON-ready; the headline numbers (MODA, MODP, precision, recall, F1, APE, method,
         frames) are top-level keys."""
         s = self.scores
@@ -190,9 +209,23 @@ def scored_estimates(area: Area, gt_xy: FloatArray, est_xy: FloatArray, threshol
     return keep
 
 
+class DetectionOptions(TypedDict, total=False):
+    """``evaluate_detection``'s settings after the dataset, for callers that pass them on."""
+
+    method: ProjectionMethod
+    noise: DetectorNoise
+    seed: int
+    frames: slice
+    threshold_m: float
+    fusion_distance_m: float
+    clip_to_image: bool
+    position_noise: PositionNoise | None
+    grid: CylinderGrid
+
+
 def evaluate_detection(
     dataset: AnnotatedDataset,
-    method: str = "cylinder",
+    method: ProjectionMethod = "cylinder",
     noise: DetectorNoise = DetectorNoise(),
     seed: int = 0,
     frames: slice = slice(None),
@@ -221,7 +254,7 @@ def evaluate_detection(
             if clip_to_image:
                 noisy, clipped = clip_boxes_to_image(noisy, camera.image_size)
             cylinders = fit_cylinders(camera, noisy.boxes, method=method, grid=grid).with_camera(i)
-            placed = np.isfinite(cylinders.xy).all(axis=1)
+            placed: NDArray[np.bool_] = np.all(np.isfinite(cylinders.xy), axis=1)
             weak = placed & (cylinders.score <= 0)
             inside = dataset.area.contains(cylinders.xy)
             counts[i] += [
@@ -260,10 +293,10 @@ def evaluate_detection(
         scores=score_detections(gt, fused_xy, threshold_m=threshold_m),
         views_per_estimate=float(merged.mean()) if len(merged) else float("nan"),
         per_camera=tuple(
-            CameraCounts(
+            _camera_counts(
                 str(dataset.camera_ids[i]),
-                *(int(c) for c in counts[i]),
-                alone=score_detections(alone_gt[i], alone_est[i], threshold_m=threshold_m),
+                counts[i],
+                score_detections(alone_gt[i], alone_est[i], threshold_m=threshold_m),
             )
             for i in range(n_cam)
         ),

@@ -24,6 +24,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
+from typing import Any, Protocol, runtime_checkable
 
 import cv2
 import numpy as np
@@ -55,7 +56,7 @@ class DetectorScores:
     detections: int
     ms_per_frame: float | None = None
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, Any]:
         return asdict(self)
 
 
@@ -65,8 +66,13 @@ def iou_matrix(a: FloatArray, b: FloatArray) -> FloatArray:
     w = np.clip(np.minimum(a[:, None, 2], b[None, :, 2]) - np.maximum(a[:, None, 0], b[None, :, 0]), 0, None)
     h = np.clip(np.minimum(a[:, None, 3], b[None, :, 3]) - np.maximum(a[:, None, 1], b[None, :, 1]), 0, None)
     inter = w * h
-    area = lambda x: np.clip(x[:, 2] - x[:, 0], 0, None) * np.clip(x[:, 3] - x[:, 1], 0, None)  # noqa: E731
-    return inter / np.maximum(area(a)[:, None] + area(b)[None, :] - inter, 1e-12)
+    iou: FloatArray = inter / np.maximum(_area(a)[:, None] + _area(b)[None, :] - inter, 1e-12)
+    return iou
+
+
+def _area(xyxy: FloatArray) -> FloatArray:
+    area: FloatArray = np.clip(xyxy[:, 2] - xyxy[:, 0], 0, None) * np.clip(xyxy[:, 3] - xyxy[:, 1], 0, None)
+    return area
 
 
 def match_by_iou(iou: FloatArray, scores: FloatArray, iou_threshold: float = 0.5) -> NDArray[np.bool_]:
@@ -150,13 +156,19 @@ def score_boxes(
                           F1=aligned.F1, threshold=aligned.threshold, images=len(truth), annotations=n_truth, detections=n_det)  # fmt: skip
 
 
-class ImageDetector:
+class ImageDetector(Protocol):
     """What ``evaluate_detector`` needs (``bevflow.detect.runtime.Detector`` is one). A detector
     that knows each box's angle also has ``detect_rotated(image, camera_height_m, focal_px,
     centre) -> (rotated (N, 5), confidence (N,))``; the others' boxes are turned to their radial
-    angle about the image circle's centre for ``AP50_rotated``."""
+    angle about the image circle's centre for ``AP50_rotated``. Frames given a plain scale need
+    a ``ScaledDetector``."""
 
     def detect(self, image_bgr: NDArray[np.uint8], camera_height_m: float, focal_px: float) -> Boxes: ...
+
+
+@runtime_checkable
+class ScaledDetector(Protocol):
+    """A detector that can also take a frame already resized by a known factor."""
 
     def detect_scaled(self, image_bgr: NDArray[np.uint8], scale: float = 1.0) -> Boxes: ...
 
@@ -194,10 +206,14 @@ def run_on_frame(detector: ImageDetector, image: NDArray[np.uint8], setup: Frame
     if setup.scale is None and hasattr(detector, "detect_rotated"):
         rotated, conf = detector.detect_rotated(image, setup.camera_height_m, setup.focal_px, setup.centre)
         return rotated_to_xyxy(rotated), np.asarray(rotated, np.float64).reshape(-1, 5), np.asarray(conf, np.float64)
-    if setup.scale is None:
+    if setup.scale is not None:
+        if not isinstance(detector, ScaledDetector):
+            raise ValueError("this detector needs each frame's camera height and focal length, not a scale")
+        boxes = detector.detect_scaled(image, setup.scale)
+    elif setup.camera_height_m is not None and setup.focal_px is not None:
         boxes = detector.detect(image, setup.camera_height_m, setup.focal_px)
     else:
-        boxes = detector.detect_scaled(image, setup.scale)
+        raise ValueError("a frame needs either a scale or its camera's height and focal length")
     return boxes.xyxy, radial_boxes(boxes.xyxy, setup.centre), boxes.confidence
 
 
@@ -260,7 +276,7 @@ def read_image(path: Path) -> NDArray[np.uint8]:
     image = cv2.imread(str(path), cv2.IMREAD_COLOR)
     if image is None:
         raise FileNotFoundError(f"cannot read image {path}")
-    return image
+    return np.asarray(image, dtype=np.uint8)
 
 
 def score_frames(results: Sequence[FrameResult], ms_per_frame: float | None = None) -> DetectorScores:

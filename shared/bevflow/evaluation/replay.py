@@ -24,6 +24,7 @@ right nor wrong (``scored_estimates``, as for WILDTRACK): nobody outside it is a
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -76,11 +77,11 @@ class ReplayEvaluation:
         return {"MODA": s.MODA, "MOTA": s.MOTA, "IDF1": s.IDF1, "HOTA": h.HOTA, "DetA": h.DetA, "AssA": h.AssA,
                 "IDSW": s.IDSW, "precision": s.precision, "recall": s.recall, "APE": s.APE, "frames": s.frames}
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, Any]:
         """JSON-ready: ``HEADLINE`` as top-level keys, then every score of the online tracks under
         ``tracked``, the settled ones under ``settled`` and the fused detections' under
         ``detection``."""
-        out: dict = self.headline()
+        out: dict[str, Any] = self.headline()
         out.update({
             "detection_MODA": self.detection.MODA,
             "tracked": {**self.scores.as_dict(), **self.hota.as_dict()},

@@ -70,12 +70,13 @@ from collections.abc import Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from bevflow.camera import Camera
-from bevflow.cylinder import METHODS, fit_cylinders
+from bevflow.cylinder import METHODS, ProjectionMethod, fit_cylinders, projection_method
 from bevflow.detect.runtime import Detector
 from bevflow.detections import Boxes, Cylinders
 from bevflow.evaluation.rendered import RenderedDetector, attribute
@@ -128,7 +129,7 @@ class SuiteRow:
     unseen: float = math.nan
     hidden: float = math.nan
 
-    def record(self) -> dict:
+    def record(self) -> dict[str, Any]:
         """The JSON record: the paper's columns (MT, PT, ML as fractions of the ground-truth
         tracks), IDF1, ``box_APE``, ``unseen`` and ``hidden`` (see the module docstring), and the counts
         behind them."""
@@ -173,7 +174,7 @@ class SuiteResult:
     detector: bool = False
     model: str | None = None  # with ``detector``: the ONNX file, None for the shipped one
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, Any]:
         return {
             "suite": self.suite,
             "frames_scale": self.frames_scale,
@@ -192,7 +193,13 @@ def paper_presets(frames_scale: float = 1.0, sequences: Iterable[int] | None = N
         raise ValueError(f"frames_scale must be a number > 0, got {frames_scale}")
     numbers = list(TABLE1) if sequences is None else list(sequences)
     presets = [table1_sequence(n) for n in numbers]  # raises on an unknown number
-    return [p.with_scene(frames=max(1, round(frames_scale * p.scene.frames))) for p in presets]
+    return [p.with_scene(frames=max(1, round(frames_scale * _length(p)))) for p in presets]
+
+
+def _length(preset: Preset) -> int:
+    if preset.scene.frames is None:
+        raise ValueError(f"preset {preset.name} is endless: it has no length to scale")
+    return preset.scene.frames
 
 
 def camera_sets(preset: Preset) -> list[tuple[str, ...]]:
@@ -234,7 +241,9 @@ class Detections:
     box_truth: list[FloatArray]
 
 
-def detect(sequence: SimulatedSequence, noise: DetectorNoise, seed: int, methods: Sequence[str]) -> dict[str, Detections]:
+def detect(
+    sequence: SimulatedSequence, noise: DetectorNoise, seed: int, methods: Sequence[ProjectionMethod]
+) -> dict[str, Detections]:
     """Noisy boxes → cylinders for each method. The noise of frame k, camera c is drawn from
     ``view_rng(seed, k, c)``, once, so every method and camera set sees the same boxes. A
     sequence with ``detected`` boxes uses those instead, and ``noise`` does not apply."""
@@ -256,7 +265,7 @@ def detect(sequence: SimulatedSequence, noise: DetectorNoise, seed: int, methods
             real = source >= 0
             truths[c].append(view.feet_xy[source[real]])
             for m in methods:
-                fit = fit_cylinders(camera, boxes, m, camera_index=c)  # type: ignore[arg-type]
+                fit = fit_cylinders(camera, boxes, m, camera_index=c)
                 # Through the projector's wire message, as live: unplaceable rows are dropped there.
                 wire = CameraCylinders.from_cylinders(site.camera_ids[c], k, sequence.time_ns[k], fit)
                 cylinders[m][k].append(wire.to_cylinders(c))
@@ -282,7 +291,7 @@ def ground_truth(
     tracks = GroundTruthTracks(rig)
     out = []
     for ids, feet, views in zip(sequence.person_ids, sequence.feet_xy, sequence.views, strict=True):
-        gt = tracks.update(_Frame(ids, feet))  # type: ignore[arg-type]
+        gt = tracks.update(_Frame(ids, feet))
         keep = np.isin(gt.person_ids, _in_sight(views, camera_indices))
         out.append((gt.track_ids[keep], gt.feet_xy[keep]))
     return out
@@ -315,7 +324,7 @@ def unseen_share(sequence: SimulatedSequence, rig: CameraRig, camera_indices: Se
 
 def _in_sight(views: Sequence[CameraView], camera_indices: Sequence[int] | None) -> IntArray:
     chosen = range(len(views)) if camera_indices is None else camera_indices
-    return np.concatenate([np.zeros(0, np.int64), *(views[c].in_sight_ids for c in chosen)])  # type: ignore[misc]
+    return np.concatenate([np.zeros(0, np.int64), *(views[c].in_sight_ids for c in chosen)])
 
 
 def track(sequence: SimulatedSequence, camera_ids: Sequence[str], cylinders: list[list[Cylinders]]) -> list[Frame]:
@@ -333,7 +342,10 @@ def track(sequence: SimulatedSequence, camera_ids: Sequence[str], cylinders: lis
 
 
 def evaluate_sequence(
-    sequence: SimulatedSequence, noise: DetectorNoise = DEFAULT_NOISE, seed: int = 0, methods: Sequence[str] = METHODS
+    sequence: SimulatedSequence,
+    noise: DetectorNoise = DEFAULT_NOISE,
+    seed: int = 0,
+    methods: Sequence[ProjectionMethod] = METHODS,
 ) -> list[SuiteRow]:
     """Every (camera set, method) row of one simulated preset."""
     preset = sequence.preset
@@ -378,7 +390,8 @@ def run_suite(
     if unknown or not methods:
         raise ValueError(f"methods must be among {', '.join(METHODS)}, got {list(methods)}")
     presets = paper_presets(frames_scale, sequences)
-    jobs = [(p, noise, seed, tuple(methods), detector, model) for p in presets]
+    chosen = tuple(projection_method(m) for m in methods)
+    jobs = [(p, noise, seed, chosen, detector, model) for p in presets]
     if processes > 1 and len(jobs) > 1:
         # Longest presets first, so the last one to finish is short.
         order = sorted(range(len(jobs)), key=lambda k: -_cost(presets[k]))
@@ -396,7 +409,9 @@ def default_processes() -> int:
     return max(1, min(len(TABLE1), os.cpu_count() or 1))
 
 
-def _evaluate_preset(job: tuple[Preset, DetectorNoise, int, tuple[str, ...], bool, Path | None]) -> list[SuiteRow]:
+def _evaluate_preset(
+    job: tuple[Preset, DetectorNoise, int, tuple[ProjectionMethod, ...], bool, Path | None],
+) -> list[SuiteRow]:
     preset, noise, seed, methods, detector, model = job
     return evaluate_sequence(simulate(preset, detector=detector, model=model), noise, seed, methods)
 
@@ -428,7 +443,7 @@ def scored_tracks(rig: CameraRig, gt: Frame, hyp: Frame, outside_xy: FloatArray)
     ids, xy = hyp
     if not len(xy):
         return ids, xy
-    keep = rig.monitored(xy).any(axis=1)
+    keep: NDArray[np.bool_] = np.any(rig.monitored(xy), axis=1)
     everyone = np.concatenate([gt[1].reshape(-1, 2), outside_xy.reshape(-1, 2)])
     if len(everyone):
         person, track, _ = match_positions(everyone, xy, THRESHOLD_M)

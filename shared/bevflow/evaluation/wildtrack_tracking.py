@@ -52,6 +52,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
+from typing import Any, Protocol, Unpack
 
 import numpy as np
 from numpy.typing import NDArray
@@ -61,6 +62,7 @@ from bevflow.evaluation.detection import (
     AnnotatedDataset,
     Area,
     DetectionEvaluation,
+    DetectionOptions,
     evaluate_detection,
     scored_estimates,
 )
@@ -92,7 +94,7 @@ class TrackingEvaluation:
     tracks: int  # distinct track ids reported in the scored frames
     settled: TrackingScores  # the same tracks one update late (module docstring, "Settled")
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, Any]:
         """JSON-ready: the detection dictionary as it is (its ``MODA``, ``precision``, ... are the
         per-frame fused detections), plus the tracking scores as top-level keys (``MOTA``,
         ``IDF1``, ``IDSW``, ``MT``, ``ML``, ``FRAG``, ...), ``tracked_MODA`` and the tracked
@@ -111,21 +113,28 @@ class TrackingEvaluation:
         return out
 
 
+class TimedDataset(AnnotatedDataset, Protocol):
+    """An annotated dataset whose frame numbers map to capture times."""
+
+    @property
+    def seconds_per_frame_number(self) -> float: ...
+
+
 def evaluate_tracking(
-    dataset: AnnotatedDataset,
+    dataset: TimedDataset,
     tracker: TrackerConfig = WILDTRACK_TRACKER,
     detection: DetectionEvaluation | None = None,
-    **detection_options: object,
+    **detection_options: Unpack[DetectionOptions],
 ) -> TrackingEvaluation:
     """Track the fused cylinders of ``evaluate_detection(dataset, **detection_options)`` (or of
     ``detection``, a run already made on ``dataset``) and score the tracks.
 
     ``dataset`` must have ``seconds_per_frame_number`` (the capture time of a frame number)."""
     if detection is None:
-        detection = evaluate_detection(dataset, **detection_options)  # type: ignore[arg-type]
+        detection = evaluate_detection(dataset, **detection_options)
     elif detection_options:
         raise TypeError("pass either a finished detection run or options for a new one, not both")
-    seconds = float(getattr(dataset, "seconds_per_frame_number"))
+    seconds = float(dataset.seconds_per_frame_number)
     by_number = {int(f.frame): f for f in dataset.frames}
     frames = [by_number[n] for n in detection.frame_numbers]
     if len(detection.fused) != len(frames):

@@ -12,7 +12,7 @@ here rather than in the tracker, which fuses every camera in one thread.
 
 from __future__ import annotations
 
-from bevflow.cylinder import CylinderGrid, fit_cylinders
+from bevflow.cylinder import CylinderGrid, ProjectionMethod, fit_cylinders
 from bevflow.detections import Boxes, Cylinders
 from bevflow.fusion import with_position_covariance
 from bevflow.site import Site
@@ -38,7 +38,7 @@ class CameraProjection:
     """Every camera of ``site``: boxes in, that camera's cylinders out (``camera`` set to its
     index in the site, as fusion takes them). ``method`` is a ``bevflow.cylinder.METHODS`` name."""
 
-    def __init__(self, site: Site, method: str = "cylinder") -> None:
+    def __init__(self, site: Site, method: ProjectionMethod = "cylinder") -> None:
         self.site = site
         self.method = method
         self._cameras = [site.camera(c) for c in site.camera_ids]  # by index, as fusion takes them

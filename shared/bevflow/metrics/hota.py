@@ -26,6 +26,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -56,7 +57,7 @@ class HotaScores:
     AssPr: float
     zero_distance_m: float
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, Any]:
         return asdict(self)
 
 
@@ -98,7 +99,8 @@ def _dense(ids: list[np.ndarray], xy: list[FloatArray]) -> tuple[list[IntArray],
 
 def _similarity(gt_xy: FloatArray, hyp_xy: FloatArray, zero_distance_m: float) -> FloatArray:
     distance = np.linalg.norm(gt_xy[:, None, :] - hyp_xy[None, :, :], axis=2)
-    return np.maximum(0.0, 1.0 - distance / zero_distance_m)
+    similarity: FloatArray = np.maximum(0.0, 1.0 - distance / zero_distance_m)
+    return similarity
 
 
 def _global_alignment(gt_ids: list[IntArray], hyp_ids: list[IntArray], similarity: list[FloatArray]) -> FloatArray:

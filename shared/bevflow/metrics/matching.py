@@ -130,9 +130,9 @@ def _solve_shared(
     indptr = np.zeros(n + 1, dtype=np.int32)
     np.cumsum(np.bincount(graph_rows, minlength=n), out=indptr[1:])
     graph = csr_matrix((weights[order], graph_cols[order].astype(np.int32), indptr), shape=(n, n))
-    sel_r, sel_c = min_weight_full_bipartite_matching(graph)
-    real = (sel_r < n_r) & (sel_c < n_c)
-    return row_ids[sel_r[real]], col_ids[sel_c[real]]
+    match_r, match_c = min_weight_full_bipartite_matching(graph)
+    real = (match_r < n_r) & (match_c < n_c)
+    return row_ids[match_r[real]], col_ids[match_c[real]]
 
 
 def _compact(ids: IntArray, n: int) -> tuple[IntArray, IntArray]:

@@ -29,6 +29,8 @@ from functools import lru_cache
 import numpy as np
 from numpy.typing import NDArray
 
+from bevflow.detections import RowIndex
+
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
@@ -78,7 +80,7 @@ class BodyShape:
     def __len__(self) -> int:
         return len(self.height)
 
-    def __getitem__(self, index: object) -> BodyShape:
+    def __getitem__(self, index: RowIndex) -> BodyShape:
         return BodyShape(self.height[index], self.shoulder_width[index], self.girth[index])
 
     @classmethod
@@ -124,7 +126,8 @@ class BodyPrimitives:
         """(M, 3) world points → (M, N) whether each point lies inside any ellipsoid of body n."""
         rel = points[:, None, None, :] - self.centers[None]
         local = np.einsum("mnpi,npik->mnpk", rel, self.axes) / self.radii[None]
-        return ((local**2).sum(-1) <= 1.0).any(-1)
+        inside: NDArray[np.bool_] = ((local**2).sum(-1) <= 1.0).any(-1)
+        return inside
 
     def surface_samples(self, points_per_body: int = 256) -> SurfaceSamples:
         """A fixed, deterministic set of surface points per body (same layout for every body)."""

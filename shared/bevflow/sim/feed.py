@@ -16,7 +16,7 @@ import numpy as np
 
 from bevflow.detections import Boxes
 from bevflow.sim.noise import DetectorNoise, apply_detector_noise, view_rng
-from bevflow.sim.presets import PRESETS, Preset
+from bevflow.sim.presets import PRESETS, Preset, SceneChanges
 from bevflow.sim.scene import Door, Scene, SceneConfig, SceneFrame
 from bevflow.sim.views import GroundTruth, GroundTruthTracks
 from bevflow.site import Site
@@ -38,9 +38,9 @@ def scene_for_site(site: Site, people: int | None = None, seed: int = 0) -> Pres
     floor (the site's ``floor``, or the box around the cameras' monitored circles)."""
     if site.site in PRESETS:
         preset = PRESETS[site.site]()
-        changes: dict[str, object] = {"frames": None, "seed": seed}
+        changes: SceneChanges = {"frames": None, "seed": seed}
         if people is not None:
-            changes.update(people=people, identities=None)
+            changes["people"], changes["identities"] = people, None
         return Preset(site.site, site, preset.with_scene(**changes).scene)
     x0, y0, x1, y1 = site.floor or _coverage_box(site)
     doors = (Door(x0, (y0 + y1) / 2), Door(x1, (y0 + y1) / 2), Door((x0 + x1) / 2, y0), Door((x0 + x1) / 2, y1))

@@ -34,16 +34,18 @@ hall crowded, and both end again.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import TypedDict, Unpack
 
 import numpy as np
 
 from bevflow.camera import FisheyeCamera
 from bevflow.sim.scene import Door, GoalArea, Obstacles, Pillar, SceneConfig, Shelf
 from bevflow.sim.surge import Surge
-from bevflow.sim.views import CameraRig
+from bevflow.sim.views import CameraRig, RigOptions
 from bevflow.site import CameraConfig, Intrinsics, Pose, Site, Thresholds, Zone
 
 FPS = 10.0
@@ -83,6 +85,15 @@ OCCLUSION_LEVELS: dict[int, tuple[int, int, float, float, float]] = {
 }
 
 
+class SceneChanges(TypedDict, total=False):
+    """The scene settings ``Preset.with_scene`` changes."""
+
+    frames: int | None
+    seed: int
+    people: int | None
+    identities: int | None
+
+
 @dataclass(frozen=True)
 class Preset:
     """A site (cameras, zones) and the crowd that walks in it. ``sequence`` is the Table 1 row
@@ -98,13 +109,13 @@ class Preset:
     def obstacles(self) -> Obstacles:
         return Obstacles(self.scene.pillars, self.scene.shelves)
 
-    def rig(self, **options: float) -> CameraRig:
+    def rig(self, **options: Unpack[RigOptions]) -> CameraRig:
         """The cameras of the site looking at the scene's obstacles."""
         return CameraRig.from_site(self.site, self.obstacles(), **options)
 
-    def with_scene(self, **changes: object) -> Preset:
+    def with_scene(self, **changes: Unpack[SceneChanges]) -> Preset:
         """The same preset with some scene settings changed (e.g. ``frames=50, seed=3``)."""
-        return replace(self, scene=replace(self.scene, **changes))  # type: ignore[arg-type]
+        return replace(self, scene=replace(self.scene, **changes))
 
 
 def table1_sequence(number: int, seed: int | None = None) -> Preset:
@@ -117,7 +128,7 @@ def table1_sequence(number: int, seed: int | None = None) -> Preset:
         # Two 3.3 m cameras whose 3.5 m circles overlap by 0.6 m, in a 13.4 × 7 m room.
         centres = [(3.5, 3.5), (9.9, 3.5)]
         floor = (0.0, 0.0, 13.4, 7.0)
-        doors = (Door(0.0, 3.5, 1.2), Door(13.4, 3.5, 1.2), Door(6.7, 0.0, 1.6))
+        doors: tuple[Door, ...] = (Door(0.0, 3.5, 1.2), Door(13.4, 3.5, 1.2), Door(6.7, 0.0, 1.6))
         pillar_slots = [Pillar(5.0, 2.0, 0.25, row.heights_m[0]), Pillar(8.4, 5.0, 0.25, row.heights_m[0])]
         shelf_slots = [Shelf(10.8, 4.7, 12.4, 5.3, 1.1), Shelf(1.6, 1.6, 3.0, 2.1, 1.5)]
         size = (1280, 1280)
@@ -182,10 +193,10 @@ def demo_hall(seed: int = 0, people: int = 50, frames: int | None = None, surge:
     )
     doors = (Door(0.0, 4.0, 3.0), Door(20.0, 0.0, 2.0), Door(40.0, 8.0, 2.0), Door(20.0, 25.0, 2.0))
     goals = (
-        GoalArea(zones[0].polygon, 2.0),  # type: ignore[arg-type]
-        GoalArea(zones[1].polygon, 1.0),  # type: ignore[arg-type]
-        GoalArea(zones[2].polygon, 3.0),  # type: ignore[arg-type]
-        GoalArea(_rect(0.0, 0.0, 40.0, 25.0), 0.5),
+        GoalArea(tuple(zones[0].polygon), 2.0),
+        GoalArea(tuple(zones[1].polygon), 1.0),
+        GoalArea(tuple(zones[2].polygon), 3.0),
+        GoalArea(tuple(_rect(0.0, 0.0, 40.0, 25.0)), 0.5),
     )
     scene = SceneConfig(
         floor=floor,
@@ -208,7 +219,7 @@ def demo_hall(seed: int = 0, people: int = 50, frames: int | None = None, surge:
 
 
 PRESETS: dict[str, Callable[[], Preset]] = {
-    **{f"seq{n}": (lambda n=n: table1_sequence(n)) for n in TABLE1},  # type: ignore[misc]
+    **{f"seq{n}": functools.partial(table1_sequence, n) for n in TABLE1},
     "demo-hall": demo_hall,
 }
 

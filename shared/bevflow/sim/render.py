@@ -295,14 +295,14 @@ class FisheyeRenderer:
             return np.zeros(0, np.int64), np.zeros(0, np.int64)
         pts = bodies.surface_samples(96).points
         px = self.camera.project(pts.reshape(-1, 3)).reshape(len(bodies), -1, 2)
-        seen = np.isfinite(px).all(2)
+        seen: NDArray[np.bool_] = np.all(np.isfinite(px), axis=2)
         lo = np.where(seen[..., None], px, np.inf).min(1)
         hi = np.where(seen[..., None], px, -np.inf).max(1)
         pad = 2.0 + 0.1 * (hi - lo)
         with np.errstate(invalid="ignore"):
             start = np.floor(lo - pad - (x0, y0))
             stop = np.ceil(hi + pad - (x0, y0)) + 1
-        ok = seen.any(1)
+        ok: NDArray[np.bool_] = np.any(seen, axis=1)
         c0 = np.clip(np.where(ok, start[:, 0], 0), 0, w).astype(np.int64)
         r0 = np.clip(np.where(ok, start[:, 1], 0), 0, h).astype(np.int64)
         c1 = np.clip(np.where(ok, stop[:, 0], 0), 0, w).astype(np.int64)

@@ -75,7 +75,8 @@ def ray_ellipsoids(o: FloatArray, d: FloatArray, centers: FloatArray, axes: Floa
 def ellipsoid_normals(points: FloatArray, centers: FloatArray, axes: FloatArray, radii: FloatArray) -> FloatArray:
     local = np.einsum("ki,kij->kj", points - centers, axes) / radii**2
     n = np.einsum("kij,kj->ki", axes, local)
-    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+    normals: FloatArray = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+    return normals
 
 
 def ray_pillar(o: FloatArray, d: FloatArray, p: Pillar) -> tuple[FloatArray, FloatArray]:

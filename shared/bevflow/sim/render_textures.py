@@ -129,7 +129,8 @@ class RenderStyle:
         else:
             coarse = self.texture_at(xy / 0.6)[:, None]
             color = base * (1 + 0.15 * coarse)
-        return np.clip(color * (1 + self.noise_amount * noise[:, None]), 0, 1)
+        shaded: FloatArray = np.clip(color * (1 + self.noise_amount * noise[:, None]), 0, 1)
+        return shaded
 
     def texture_at(self, uv: FloatArray) -> FloatArray:
         """Bilinear lookup of the tiling noise at texel coordinates (N, 2)."""
@@ -141,7 +142,8 @@ class RenderStyle:
         t = self.noise_texture
         top = t[i[:, 1], i[:, 0]] * (1 - fx) + t[i[:, 1], j[:, 0]] * fx
         bottom = t[j[:, 1], i[:, 0]] * (1 - fx) + t[j[:, 1], j[:, 0]] * fx
-        return top * (1 - fy) + bottom * fy
+        blended: FloatArray = top * (1 - fy) + bottom * fy
+        return blended
 
 
 @dataclass(frozen=True, eq=False)
@@ -260,14 +262,14 @@ def finish_image(linear: FloatArray, radius_px: FloatArray, style: RenderStyle, 
     point over the image circle's radius, NaN outside the lens), optical blur, sensor noise, JPEG."""
     out = _exposed(linear, radius_px, style) * np.float32(255)
     if style.blur_sigma_px > 0:
-        out = cv2.GaussianBlur(out, (0, 0), style.blur_sigma_px)
+        out = np.asarray(cv2.GaussianBlur(out, (0, 0), style.blur_sigma_px), dtype=np.float32)
     if style.noise_sigma > 0:
         out += rng.normal(0, style.noise_sigma, out.shape).astype(np.float32)
-    out8 = np.clip(out + 0.5, 0, 255).astype(np.uint8)
+    out8: NDArray[np.uint8] = np.clip(out + 0.5, 0, 255).astype(np.uint8)
     if style.jpeg_quality > 0:
         ok, buf = cv2.imencode(".jpg", out8, [cv2.IMWRITE_JPEG_QUALITY, style.jpeg_quality])
         if ok:
-            out8 = cv2.imdecode(buf, cv2.IMREAD_COLOR)
+            out8 = np.asarray(cv2.imdecode(buf, cv2.IMREAD_COLOR), dtype=np.uint8)
     return out8
 
 
@@ -275,7 +277,9 @@ def finish_pixels(linear: FloatArray, radius_px: FloatArray, style: RenderStyle)
     """``finish_image`` for N separate pixels (N, 3) with their ``radius_px`` (N,), without the
     steps that need neighbours or randomness (blur, noise, JPEG): for a style that has none of
     them, it gives the same values as ``finish_image``."""
-    return np.clip(_exposed(linear, radius_px, style) * np.float32(255) + 0.5, 0, 255).astype(np.uint8)
+    scaled = _exposed(linear, radius_px, style) * np.float32(255) + 0.5
+    exposed: NDArray[np.uint8] = np.clip(scaled, 0, 255).astype(np.uint8)
+    return exposed
 
 
 def _exposed(linear: FloatArray, radius_px: FloatArray, style: RenderStyle) -> NDArray[np.float32]:
@@ -294,7 +298,8 @@ def _random_color(
     rng: np.random.Generator, saturation: tuple[float, float] = (0.0, 0.9), value: tuple[float, float] = (0.1, 0.95)
 ) -> FloatArray:
     hsv = np.array([[[rng.uniform(0, 180), rng.uniform(*saturation) * 255, rng.uniform(*value) * 255]]], np.float32)
-    return cv2.cvtColor(hsv.astype(np.uint8), cv2.COLOR_HSV2BGR)[0, 0].astype(np.float64) / 255.0
+    bgr: FloatArray = cv2.cvtColor(hsv.astype(np.uint8), cv2.COLOR_HSV2BGR)[0, 0].astype(np.float64) / 255.0
+    return bgr
 
 
 def _tiling_noise(rng: np.random.Generator) -> FloatArray:
@@ -302,10 +307,11 @@ def _tiling_noise(rng: np.random.Generator) -> FloatArray:
     fine = _wrapped_blur(rng.normal(0, 1, (_NOISE_SIZE, _NOISE_SIZE)), 1.0)
     coarse = _wrapped_blur(rng.normal(0, 1, (_NOISE_SIZE, _NOISE_SIZE)), 6.0)
     noise = fine / (fine.std() + 1e-9) + 0.7 * coarse / (coarse.std() + 1e-9)
-    return np.clip(noise / 2.5, -1, 1)
+    clipped: FloatArray = np.clip(noise / 2.5, -1, 1)
+    return clipped
 
 
 def _wrapped_blur(image: FloatArray, sigma: float) -> FloatArray:
     pad = int(4 * sigma) + 1
     padded = np.pad(image, pad, mode="wrap")
-    return cv2.GaussianBlur(padded, (0, 0), sigma)[pad:-pad, pad:-pad]
+    return np.asarray(cv2.GaussianBlur(padded, (0, 0), sigma), dtype=np.float64)[pad:-pad, pad:-pad]

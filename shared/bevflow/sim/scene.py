@@ -26,6 +26,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -35,6 +36,10 @@ from bevflow.sim.bodies import BodyPrimitives, BodyShape, Posture, pose_bodies
 from bevflow.sim.surge import Surge, extra_people, surge_area
 
 FloatArray = NDArray[np.float64]
+# One step of a visit: walk to a place (a goal, a door to leave by, the door reached) or stand still.
+_PlaceStep = tuple[Literal["goal", "exit", "exit_now"], FloatArray]
+_DwellStep = tuple[Literal["dwell"], tuple[float, Posture]]
+_PlanStep = _PlaceStep | _DwellStep
 IntArray = NDArray[np.int64]
 
 BODY_RADIUS = 0.25  # m: how close a person's feet centre may come to an obstacle or wall
@@ -204,7 +209,8 @@ class Obstacles:
 
     def blocks_segments(self, a: FloatArray, b: FloatArray, inflate: float) -> NDArray[np.bool_]:
         """(N,): whether each floor segment a→b passes within ``inflate`` of any footprint."""
-        return self.near_segments(a, b, inflate).any(1)
+        blocked: NDArray[np.bool_] = np.any(self.near_segments(a, b, inflate), axis=1)
+        return blocked
 
     def blocks_rays(
         self, origin: FloatArray, points: FloatArray, only: NDArray[np.bool_] | None = None
@@ -217,9 +223,11 @@ class Obstacles:
         hit = np.zeros(len(d), dtype=bool)
         n_pillars = len(self.pillar_xy)
         for k in range(len(self)):
-            rows = slice(None) if only is None else np.flatnonzero(only[:, k])
-            if only is not None and not len(rows):  # type: ignore[arg-type]
-                continue
+            rows: slice | NDArray[np.intp] = slice(None)
+            if only is not None:
+                rows = np.flatnonzero(only[:, k])
+                if not len(rows):
+                    continue
             if k < n_pillars:
                 t0, t1 = _cylinder_interval(o, d[rows], self.pillar_xy[k], self.pillar_radius[k], self.pillar_height[k])
             else:
@@ -314,7 +322,9 @@ class Navigator:
             ends = np.broadcast_to(p, self.nodes.shape)
             ok = ~self.obstacles.blocks_segments(ends, self.nodes, clearance)
             graph[k, :n] = graph[:n, k] = np.where(ok, np.linalg.norm(self.nodes - p, axis=1), 0.0)
-        dist, prev = dijkstra(graph, directed=False, indices=n, return_predecessors=True)
+        # One source, asked for as a list of one: the rows are the distances and predecessors from it.
+        distances, predecessors = dijkstra(graph, directed=False, indices=[n], return_predecessors=True)
+        dist, prev = distances[0], predecessors[0]
         if not np.isfinite(dist[n + 1]):
             return [goal]
         path, k = [], int(prev[n + 1])
@@ -338,7 +348,8 @@ def _in_polygon(pts: FloatArray, polygon: FloatArray) -> NDArray[np.bool_]:
     crosses = (ay > y) != (by > y)
     with np.errstate(divide="ignore", invalid="ignore"):
         xs = ax + (y - ay) * (bx - ax) / (by - ay)
-    return (crosses & (x < xs)).sum(1) % 2 == 1
+    inside: NDArray[np.bool_] = (crosses & (x < xs)).sum(1) % 2 == 1
+    return inside
 
 
 def polygon_area(polygon: FloatArray) -> float:
@@ -372,13 +383,25 @@ class SceneFrame:
         return pose_bodies(self.body, self.feet_xy, self.heading, self.gait_phase, self.speed, self.posture)
 
 
+def _leader(follower: _Walker) -> _Walker:
+    assert follower.leader is not None, "only a group's followers keep a slot"
+    return follower.leader
+
+
+def _door_taken(walker: _Walker) -> FloatArray:
+    """The door someone who has gone out left by: their plan still starts with reaching it."""
+    step = walker.plan[0]
+    assert step[0] != "dwell", "nobody leaves while standing still"
+    return step[1]
+
+
 @dataclass(eq=False)
 class _Walker:
     pid: int
     identity: int
     pos: FloatArray
     speed: float  # preferred walking speed
-    plan: list[tuple[str, object]]  # ("goal", xy) | ("dwell", (seconds, Posture)) | ("exit", xy)
+    plan: list[_PlanStep]
     group: int = -1
     leader: _Walker | None = None
     slot: FloatArray = field(default_factory=lambda: np.zeros(2))  # (forward, left) from the leader
@@ -456,7 +479,7 @@ class Scene:
 
     def _group_size(self, available: int) -> int:
         if available >= 2 and self._rng.random() < self.config.group_fraction:
-            return int(min(available, self._rng.integers(2, 5)))
+            return min(available, int(self._rng.integers(2, 5)))
         return 1
 
     def _place_initial_crowd(self) -> None:
@@ -509,7 +532,7 @@ class Scene:
             self._walkers.append(w)
             leader = leader or w
 
-    def _plan(self) -> list[tuple[str, object]]:
+    def _plan(self) -> list[_PlanStep]:
         rng, cfg = self._rng, self.config
         surge = surge_area(cfg.surges, self._t)
         if surge is not None and rng.random() < surge.share:
@@ -520,10 +543,10 @@ class Scene:
             long_stop = Posture.SITTING
         n_goals = int(rng.integers(cfg.goals_per_visit[0], cfg.goals_per_visit[1] + 1))
         stop_at = int(rng.integers(n_goals)) if long_stop is not None else -1
-        plan: list[tuple[str, object]] = []
+        plan: list[_PlanStep] = []
         for k in range(n_goals):
             plan.append(("goal", self._sample_goal()))
-            if k == stop_at:
+            if k == stop_at and long_stop is not None:
                 plan.append(("dwell", (float(rng.uniform(20.0, 90.0)), long_stop)))
             elif rng.random() < cfg.dwell_probability:
                 plan.append(("dwell", (float(rng.uniform(1.5, 6.0)), Posture.STANDING)))
@@ -531,7 +554,7 @@ class Scene:
             plan.append(("exit", self._doors_out[int(rng.integers(len(self._doors_out)))][0]))
         return plan
 
-    def _surge_plan(self, surge: Surge) -> list[tuple[str, object]]:
+    def _surge_plan(self, surge: Surge) -> list[_PlanStep]:
         """A visit during a surge: straight to its area, a long stand there, then out."""
         rng = self._rng
         for _ in range(200):
@@ -541,7 +564,7 @@ class Scene:
                 break
         else:
             raise ValueError("no free floor in the surge area")
-        plan: list[tuple[str, object]] = [("goal", pts[0]), ("dwell", (float(rng.uniform(*surge.stay_s)), Posture.STANDING))]
+        plan: list[_PlanStep] = [("goal", pts[0]), ("dwell", (float(rng.uniform(*surge.stay_s)), Posture.STANDING))]
         if self._doors_out:
             plan.append(("exit", self._doors_out[int(rng.integers(len(self._doors_out)))][0]))
         return plan
@@ -552,7 +575,8 @@ class Scene:
             pts = _sample_in_polygon(self._rng, area, 8)
             pts = pts[self.navigator.is_free(pts, clearance=_ROUTE_CLEARANCE)]
             if len(pts):
-                return pts[0]
+                goal: FloatArray = pts[0]
+                return goal
         raise ValueError("no free floor to walk to: the goal areas are covered by obstacles")
 
     # --- one time step ------------------------------------------------------------------------------
@@ -562,7 +586,7 @@ class Scene:
         followers = []
         for k, w in enumerate(walkers):  # leaders come before their followers
             if w.leader is not None and w.leader.gone:  # the leader went out: follow them through the door
-                w.plan, w.leader, w.route = [("exit", w.leader.plan[0][1])], None, []
+                w.plan, w.leader, w.route = [("exit", _door_taken(w.leader))], None, []
             if w.leader is None:
                 desired[k] = self._pursue(w, dt)
             else:
@@ -593,14 +617,15 @@ class Scene:
                 if self._doors_out:
                     return np.zeros(2)
                 w.plan = self._plan()
-            kind, what = w.plan.pop(0)
-            if kind == "dwell":
-                seconds, posture = what  # type: ignore[misc]
+            step = w.plan.pop(0)
+            if step[0] == "dwell":
+                seconds, posture = step[1]
                 w.dwell_left, w.posture, w.spot = seconds, posture, w.pos.copy()
                 return np.zeros(2)
+            kind, where = step
             if kind == "exit":
-                w.plan.insert(0, ("exit_now", what))
-            w.route = self.navigator.route(w.pos, np.asarray(what))
+                w.plan.insert(0, ("exit_now", where))
+            w.route = self.navigator.route(w.pos, np.asarray(where))
             w.stuck_s = 0.0
         self._watch_progress(w, dt)
         return _toward(w.pos, w.route[0], w.speed, slow_down=len(w.route) == 1)
@@ -619,9 +644,10 @@ class Scene:
     def _follow(self, ws: list[_Walker], dt: float) -> FloatArray:
         """Desired velocities of group members: each keeps a slot beside or behind the leader,
         or the leader's own spot when the slot is inside an obstacle; around obstacles by route."""
-        heading = np.array([w.leader.heading for w in ws])  # type: ignore[union-attr]
+        leaders = [_leader(w) for w in ws]
+        heading = np.array([leader.heading for leader in leaders])
         slot = np.array([w.slot for w in ws])
-        lead = np.array([w.leader.pos for w in ws])  # type: ignore[union-attr]
+        lead = np.array([leader.pos for leader in leaders])
         c, s = np.cos(heading), np.sin(heading)
         target = lead + np.stack([c * slot[:, 0] - s * slot[:, 1], s * slot[:, 0] + c * slot[:, 1]], 1)
         target = np.where(self.navigator.is_free(target, clearance=BODY_RADIUS)[:, None], target, lead)
@@ -750,7 +776,8 @@ def _social_force(pos: FloatArray, heading: FloatArray, group: IntArray) -> Floa
     weight = 0.35 + 0.65 * (1 + ahead) / 2
     same = (group[:, None] == group[None]) & (group[:, None] >= 0)
     mag = np.where(dist < 2.5, 2.0 * np.exp((0.5 - dist) / 0.3), 0.0) * weight * np.where(same, 0.3, 1.0)
-    return (mag[..., None] * away).sum(1)
+    push: FloatArray = (mag[..., None] * away).sum(1)
+    return push
 
 
 def _group_slot(k: int, size: int) -> FloatArray:

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
+from typing import Protocol, TypedDict, Unpack
 
 import numpy as np
 from numpy.typing import NDArray
@@ -82,6 +83,23 @@ class CameraView:
         return cls(camera_index, Boxes.empty(), np.zeros(0, np.int64), np.zeros(0), np.zeros(0, bool), np.zeros((0, 2)))
 
 
+class RigOptions(TypedDict, total=False):
+    """``CameraRig``'s settings after its cameras, radii and obstacles."""
+
+    points_per_body: int
+    min_visible_fraction: float
+    min_box_px: float
+
+
+class PeopleOnFloor(Protocol):
+    """What ``GroundTruthTracks`` reads of a frame: who is there and where their feet are."""
+
+    @property
+    def person_ids(self) -> NDArray[np.int64]: ...
+    @property
+    def feet_xy(self) -> NDArray[np.float64]: ...
+
+
 class CameraRig:
     """The cameras of a site, the static obstacles they look past, and the visibility rules.
 
@@ -109,9 +127,9 @@ class CameraRig:
         self.min_box_px = min_box_px
 
     @classmethod
-    def from_site(cls, site: Site, obstacles: Obstacles | None = None, **options: float) -> CameraRig:
+    def from_site(cls, site: Site, obstacles: Obstacles | None = None, **options: Unpack[RigOptions]) -> CameraRig:
         cams = [site.camera(c.id) for c in site.cameras]
-        return cls(cams, [c.monitored_radius_m for c in site.cameras], obstacles, **options)  # type: ignore[arg-type]
+        return cls(cams, [c.monitored_radius_m for c in site.cameras], obstacles, **options)
 
     def monitored(self, feet_xy: FloatArray) -> BoolArray:
         """(N, C): whether each floor point lies in each camera's monitored circle."""
@@ -237,7 +255,8 @@ class CameraRig:
             return hidden
         below = np.broadcast_to(origin[:2], feet_xy.shape)
         near = self.obstacles.near_segments(below, feet_xy, _BODY_REACH_M) & candidate[:, None]
-        body, k = np.nonzero(usable & near.any(1)[:, None])
+        near_any: BoolArray = np.any(near, axis=1)
+        body, k = np.nonzero(usable & near_any[:, None])
         if len(body):
             hidden[body, k] = self.obstacles.blocks_rays(origin, pts[body, k], only=near[body])
         return hidden
@@ -263,8 +282,8 @@ class GroundTruthTracks:
         self._track_of: dict[int, int] = {}  # person id → track id, for those inside last frame
         self._next = 1
 
-    def update(self, frame: SceneFrame) -> GroundTruth:
-        inside = self.rig.monitored(frame.feet_xy).any(1) if len(frame) else np.zeros(0, bool)
+    def update(self, frame: PeopleOnFloor) -> GroundTruth:
+        inside = self.rig.monitored(frame.feet_xy).any(1) if len(frame.person_ids) else np.zeros(0, bool)
         track_of: dict[int, int] = {}
         for pid in frame.person_ids[inside].tolist():
             if pid in self._track_of:

@@ -103,7 +103,9 @@ class SettledTracks:
         return SettledFrame(now.time_s, replace(tracks[report], xy=xy[report], id=ids[report]))
 
 
-def _bridge(before: _Update, now: _Update, after: _Update, at: NDArray[np.int64], missed: BoolArray, xy: NDArray) -> BoolArray:
+def _bridge(
+    before: _Update, now: _Update, after: _Update, at: NDArray[np.int64], missed: BoolArray, xy: NDArray[np.float64]
+) -> BoolArray:
     """Which of the tracks ``missed`` at ``now`` were matched at ``before`` too; writes their
     position at ``now`` into ``xy``, interpolated in time between ``before`` and ``after``."""
     earlier = before.tracks

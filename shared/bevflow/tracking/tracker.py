@@ -50,7 +50,8 @@ at 2 fps, where a coasting person has moved on by 0.6 m.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -58,6 +59,9 @@ from numpy.typing import NDArray
 from bevflow.detections import Cylinders
 from bevflow.metrics.matching import assign_edges, gated_pairs
 from bevflow.tracking.kalman import ConstantVelocityKalman, smooth
+
+if TYPE_CHECKING:  # the tracker reads a site's thresholds but needs no site to run
+    from bevflow.site import Thresholds
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -135,15 +139,15 @@ class TrackerConfig:
             raise ValueError(f"TrackerConfig.shape_smoothing must be in [0, 1], got {self.shape_smoothing}")
 
     @classmethod
-    def from_thresholds(cls, thresholds: object, **overrides: object) -> TrackerConfig:
+    def from_thresholds(cls, thresholds: Thresholds, **overrides: Any) -> TrackerConfig:
         """Settings from a site's ``Thresholds`` (track_gate_m, track_activate_hits,
-        track_max_misses); ``overrides`` set any other field."""
-        return cls(
-            gate_m=thresholds.track_gate_m,  # type: ignore[attr-defined]
-            activate_hits=thresholds.track_activate_hits,  # type: ignore[attr-defined]
-            max_misses=thresholds.track_max_misses,  # type: ignore[attr-defined]
-            **overrides,  # type: ignore[arg-type]
+        track_max_misses); ``overrides`` set any other field (checked as the fields are)."""
+        site = cls(
+            gate_m=thresholds.track_gate_m,
+            activate_hits=thresholds.track_activate_hits,
+            max_misses=thresholds.track_max_misses,
         )
+        return replace(site, **overrides)
 
     def kalman(self) -> ConstantVelocityKalman:
         return ConstantVelocityKalman(self.process_noise, self.measurement_std_m, self.initial_speed_std_mps)
@@ -315,7 +319,8 @@ class Tracker:
         offset = sightings.xy[None, :, :] - tracks.state[rows, None, :2]  # (tracks, sightings, 2)
         joint = tracks.covariance[rows, None, :2, :2] + sightings.covariance[None]
         d2 = np.einsum("tsi,tsij,tsj->ts", offset, np.linalg.inv(joint), offset)
-        return (d2 < self.config.sighting_gate_chi2).any(axis=1)
+        sighted: BoolArray = (d2 < self.config.sighting_gate_chi2).any(axis=1)
+        return sighted
 
     def _advance_clock(self, time_s: float) -> float:
         time_s = float(time_s)
@@ -383,7 +388,8 @@ class Tracker:
             return None
         covariance = cylinders.covariance[det]
         fixed = self.config.measurement_std_m**2 * np.eye(2)
-        return np.where(np.isfinite(covariance).all(axis=(1, 2))[:, None, None], covariance, fixed)
+        known: NDArray[np.bool_] = np.all(np.isfinite(covariance), axis=(1, 2))
+        return np.where(known[:, None, None], covariance, fixed)
 
     def _confirm(self) -> None:
         tracks = self._tracks

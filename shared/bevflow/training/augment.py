@@ -31,7 +31,7 @@ def rotate(image: Image, owner: Owner, angle_deg: float, center: tuple[float, fl
     m = cv2.getRotationMatrix2D(c, angle_deg, 1.0)
     img = cv2.warpAffine(image, m, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
     own = cv2.warpAffine(owner.astype(np.float32), m, (w, h), flags=cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT, borderValue=-1)
-    return img, own.astype(np.int16)
+    return np.asarray(img, dtype=np.uint8), own.astype(np.int16)
 
 
 def flip(image: Image, owner: Owner, horizontal: bool = True) -> tuple[Image, Owner]:
@@ -43,7 +43,7 @@ def clahe(image: Image, clip_limit: float = 2.0, tiles: int = 8) -> Image:
     """Contrast-limited adaptive histogram equalisation of the lightness (LAB L channel)."""
     lab = cv2.cvtColor(image, cv2.COLOR_BGR2LAB)
     lab[..., 0] = cv2.createCLAHE(clipLimit=clip_limit, tileGridSize=(tiles, tiles)).apply(np.ascontiguousarray(lab[..., 0]))
-    return cv2.cvtColor(lab, cv2.COLOR_LAB2BGR)
+    return np.asarray(cv2.cvtColor(lab, cv2.COLOR_LAB2BGR), dtype=np.uint8)
 
 
 def jitter_colors(rng: np.random.Generator, image: Image) -> Image:
@@ -54,7 +54,7 @@ def jitter_colors(rng: np.random.Generator, image: Image) -> Image:
     img *= rng.uniform(0.85, 1.15, 3).astype(np.float32)
     out = np.clip(img, 0, 255).astype(np.uint8)
     if rng.random() < 0.1:
-        out = cv2.cvtColor(cv2.cvtColor(out, cv2.COLOR_BGR2GRAY), cv2.COLOR_GRAY2BGR)
+        out = np.asarray(cv2.cvtColor(cv2.cvtColor(out, cv2.COLOR_BGR2GRAY), cv2.COLOR_GRAY2BGR), dtype=np.uint8)
     return out
 
 

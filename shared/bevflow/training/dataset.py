@@ -142,12 +142,20 @@ def _window_floor_points(rng: np.random.Generator, cam: FisheyeCamera, window: t
     return pts[np.hypot(*pts.T) < 30.0] if len(pts) else np.zeros((1, 2))
 
 
+def _semi_axes(rng: np.random.Generator) -> tuple[float, float, float]:
+    rx, ry, rz = rng.uniform([0.1, 0.1, 0.1], [0.45, 0.35, 0.6]).tolist()
+    return rx, ry, rz
+
+
 def _random_room(rng: np.random.Generator, height: float, floor_pts: FloatArray) -> Room:
     lo = np.minimum(floor_pts.min(0), 0.0) - rng.uniform(0.5, 12.0, 2) * (rng.random(2) < 0.6) - 0.6
     hi = np.maximum(floor_pts.max(0), 0.0) + rng.uniform(0.5, 12.0, 2) * (rng.random(2) < 0.6) + 0.6
     # Walls only where a floor point is not already outside: keep the room around what is seen.
     lo, hi = np.minimum(lo, -1.0), np.maximum(hi, 1.0)
-    pick = lambda k: floor_pts[rng.integers(0, len(floor_pts), k)]  # noqa: E731
+
+    def pick(k: int) -> FloatArray:
+        return floor_pts[rng.integers(0, len(floor_pts), k)]
+
     pillars = tuple(Pillar(float(x), float(y), float(rng.uniform(0.15, 0.5)), float(rng.choice([height + 1, rng.uniform(1, 3)])))
                     for x, y in pick(int(rng.integers(0, 3))))  # fmt: skip
     shelves = []
@@ -157,10 +165,15 @@ def _random_room(rng: np.random.Generator, height: float, floor_pts: FloatArray)
             sx, sy = sy, sx
         shelves.append(Shelf(float(x), float(y), float(x + sx), float(y + sy), float(rng.uniform(0.5, 2.0))))
     clutter = tuple(
-        Clutter(float(x), float(y), *(float(v) for v in rng.uniform([0.1, 0.1, 0.1], [0.45, 0.35, 0.6])),
-                heading=float(rng.uniform(0, np.pi)), color_index=int(rng.integers(0, 8)))
+        Clutter(
+            float(x),
+            float(y),
+            *_semi_axes(rng),
+            heading=float(rng.uniform(0, np.pi)),
+            color_index=int(rng.integers(0, 8)),
+        )
         for x, y in pick(int(rng.integers(0, 7)))
-    )  # fmt: skip
+    )
     return Room((float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])), float(height + rng.uniform(-0.5, 1.0)),
                 pillars, tuple(shelves), clutter)  # fmt: skip
 

@@ -11,6 +11,7 @@ running ones, and the first steps of fine-tuning do not jolt the network.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import torch
@@ -60,7 +61,8 @@ def model_from_onnx(path: Path, calibration: torch.Tensor) -> CenterNetSmall:
 
     weights = {i.name.removeprefix("net."): torch.from_numpy(numpy_helper.to_array(i).copy())
                for i in onnx.load(str(path)).graph.initializer if i.name.startswith("net.")}  # fmt: skip
-    model = CenterNetSmall().eval()
+    model = CenterNetSmall()
+    model.eval()
     norms: dict[str, nn.BatchNorm2d] = {}
     with torch.no_grad():
         for name, module in model.named_modules():
@@ -85,8 +87,11 @@ def model_from_onnx(path: Path, calibration: torch.Tensor) -> CenterNetSmall:
 def _calibrate(model: CenterNetSmall, norms: dict[str, nn.BatchNorm2d], batch: torch.Tensor) -> None:
     stats: dict[str, tuple[torch.Tensor, torch.Tensor]] = {}
 
-    def keep(name: str):  # noqa: ANN202
-        return lambda _m, inputs, _out: stats.__setitem__(name, (inputs[0].mean((0, 2, 3)), inputs[0].var((0, 2, 3))))
+    def keep(name: str) -> Callable[[nn.Module, tuple[torch.Tensor, ...], torch.Tensor], None]:
+        def record(_module: nn.Module, inputs: tuple[torch.Tensor, ...], _output: torch.Tensor) -> None:
+            stats[name] = (inputs[0].mean((0, 2, 3)), inputs[0].var((0, 2, 3)))
+
+        return record
 
     hooks = [norm.register_forward_hook(keep(name)) for name, norm in norms.items()]
     with torch.no_grad():

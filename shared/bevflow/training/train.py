@@ -18,6 +18,7 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -50,7 +51,7 @@ class TrainConfig:
     zoom: float = 1.0  # the input scale learnt, × bevflow.detect.scaling's (match ``render --zoom``)
 
 
-def build_targets(boxes: FloatArray, ignore: NDArray[np.bool_], size: int) -> dict[str, NDArray]:
+def build_targets(boxes: FloatArray, ignore: NDArray[np.bool_], size: int) -> dict[str, NDArray[Any]]:
     """CenterNet targets for one image of ``size`` px: heatmap (1, S, S), negative-loss mask,
     and per-box cell index, log-size and offset (padded to 64 boxes with a validity mask)."""
     s = size // STRIDE
@@ -178,7 +179,7 @@ class CocoSampler:
         h, w = img.shape[:2]
         centre = ((w - 1) / 2.0, (h - 1) / 2.0)
         angle = self.rng.uniform(0, 360)
-        img = cv2.warpAffine(img, cv2.getRotationMatrix2D(centre, angle, 1.0), (w, h))
+        img = np.asarray(cv2.warpAffine(img, cv2.getRotationMatrix2D(centre, angle, 1.0), (w, h)), dtype=np.uint8)
         r = rotate_rotated_boxes(r, angle, centre)
         if self.rng.random() < 0.5:
             img = np.ascontiguousarray(img[:, ::-1])
@@ -236,7 +237,8 @@ def train(
     log(f"{len(sampler) if sampler else 0} rendered + {len(user) if user else 0} annotated samples; "
         f"{sum(p.numel() for p in model.parameters())} parameters")
     model.train()
-    last_save, running, t0 = time.monotonic(), {}, time.monotonic()
+    running: dict[str, float] = {}
+    last_save, t0 = time.monotonic(), time.monotonic()
     while step < config.steps:
         if step and step % config.reload_every == 0 and sampler is not None:
             sampler.reload()
@@ -269,8 +271,8 @@ def _mixed_batch(
     parts = []
     if n_user < config.batch and shards is not None:
         parts.append(shards.batch(config.batch - n_user))
-    if n_user:
-        samples = [user.sample() for _ in range(n_user)]  # type: ignore[union-attr]
+    if n_user and user is not None:
+        samples = [user.sample() for _ in range(n_user)]
         x = torch.from_numpy(np.stack([im for im, _ in samples])).permute(0, 3, 1, 2).float()
         t = [build_targets(b, np.zeros(len(b), bool), config.crop) for _, b in samples]
         parts.append((normalise(x), {k: torch.from_numpy(np.stack([tt[k] for tt in t])) for k in t[0]}))

@@ -1,11 +1,9 @@
 from __future__ import annotations
 
-import dataclasses
 import json
 from pathlib import Path
 
 import cv2
-import numpy as np
 import pytest
 
 from bevflow.datasets.mot import read_detections, read_truth

@@ -21,7 +21,7 @@ def test_time_calls_calls_at_least_once() -> None:
 
 
 def test_medians_are_in_milliseconds() -> None:
-    timing = Timing(wall_s=[0.001, 0.003, 0.002], cpu_s=[0.0005, 0.0005, 0.004])
+    timing = Timing(wall_s=[0.001, 0.003, 0.002], cpu_s=[0.0005, 0.0005, 0.004], result=None)
     assert timing.wall_ms == pytest.approx(2.0)
     assert timing.cpu_ms == pytest.approx(0.5)
     assert timing.wall_percentile_ms(100) == pytest.approx(3.0)

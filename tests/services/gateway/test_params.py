@@ -1,6 +1,6 @@
 from __future__ import annotations
 
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta, timezone
 
 import pytest
 from fastapi import HTTPException
@@ -11,9 +11,9 @@ from bevflow_services.gateway.params import TimeRange, recent, split_csv, time_r
 @pytest.mark.parametrize(
     ("moment", "ns"),
     [
-        (datetime(1970, 1, 1, tzinfo=timezone.utc), 0),
+        (datetime(1970, 1, 1, tzinfo=UTC), 0),
         (datetime(1970, 1, 1), 0),  # naive is UTC
-        (datetime(2023, 11, 14, 22, 13, 20, 250_000, tzinfo=timezone.utc), 1_700_000_000_250_000_000),
+        (datetime(2023, 11, 14, 22, 13, 20, 250_000, tzinfo=UTC), 1_700_000_000_250_000_000),
         (datetime(2023, 11, 15, 0, 13, 20, tzinfo=timezone(timedelta(hours=2))), 1_700_000_000_000_000_000),
     ],
 )
@@ -22,7 +22,7 @@ def test_to_ns(moment: datetime, ns: int) -> None:
 
 
 def test_time_range_refuses_since_after_until() -> None:
-    early, late = datetime(2024, 1, 1, tzinfo=timezone.utc), datetime(2024, 1, 2, tzinfo=timezone.utc)
+    early, late = datetime(2024, 1, 1, tzinfo=UTC), datetime(2024, 1, 2, tzinfo=UTC)
     assert time_range(early, late) == TimeRange(to_ns(early), to_ns(late))
     with pytest.raises(HTTPException) as refused:
         time_range(late, early)
