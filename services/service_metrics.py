@@ -119,9 +119,11 @@ class MetricsBook:
 
     def message(self, site: str, service: str, instance: str, time_ns: int) -> ServiceMetrics:
         with self._lock:
-            values = [MetricSeries(name=n, labels=dict(l), value=v) for (n, l), v in sorted(self._values.items())]
-            histograms = [HistogramSeries(name=n, labels=dict(l), bounds=list(h.bounds), counts=h.cumulative(),
-                                          count=h.count, sum=h.total) for (n, l), h in sorted(self._histograms.items())]
+            values = [MetricSeries(name=n, labels=dict(labels), value=v)
+                      for (n, labels), v in sorted(self._values.items())]
+            histograms = [HistogramSeries(name=n, labels=dict(labels), bounds=list(h.bounds), counts=h.cumulative(),
+                                          count=h.count, sum=h.total)
+                          for (n, labels), h in sorted(self._histograms.items())]
         return ServiceMetrics(site=site, service=service, instance=instance, time_ns=time_ns, values=values,
                               histograms=histograms)
 

@@ -28,7 +28,7 @@ from prometheus_client.core import (
 )
 from prometheus_client.registry import Collector, CollectorRegistry
 
-from bevflow.schemas import EVENT_TYPES, AlertMessage, HistogramSeries, ServiceMetrics
+from bevflow.schemas import EVENT_TYPES, AlertMessage, HistogramSeries, MetricSeries, ServiceMetrics
 
 from bevflow_services.gateway.routes.health import Status, site_health
 from bevflow_services.gateway.state import GatewayState
@@ -180,7 +180,7 @@ class SiteCollector(Collector):
     def _alerts_and_clients(self) -> Iterator[Metric]:
         active = _gauge("alerts_active", "alerts started and not ended, by type (distance_incident: the open "
                         "incidents)", ["type"])
-        counts = Counter(e.type for e in self.state.active_alerts())
+        counts: Counter[str] = Counter(e.type for e in self.state.active_alerts())
         for kind in EVENT_TYPES:
             active.add_metric([kind], counts[kind])
         yield active
@@ -210,7 +210,8 @@ class SiteCollector(Collector):
             return
         families: dict[str, tuple[Any, list[str]]] = {}
         for report in self.services.current():
-            for series in [*report.values, *report.histograms]:
+            reported: list[MetricSeries | HistogramSeries] = [*report.values, *report.histograms]
+            for series in reported:
                 info = SERIES.get(series.name)
                 if info is None or (info.kind == "histogram") != isinstance(series, HistogramSeries):
                     continue  # not a series this gateway serves
