@@ -20,14 +20,14 @@ import threading
 from collections import OrderedDict
 from collections.abc import Callable, Iterator
 from bevflow.schemas import AlertMessage, Event
+from bevflow.units import NS_PER_S
 
 from bevflow_services.gateway.history import EventQuery, HistoryStore
 
-NS = 1_000_000_000
 RECENT_ALERTS = 4096
 # How long before its last message an alert may have ended (an incident closes once it has been
 # quiet a while): history rows that ended earlier than this before the cursor cannot be newer.
-END_TO_RAISE_NS = 3600 * NS
+END_TO_RAISE_NS = 3600 * NS_PER_S
 PAGE = 1000
 MAX_REPLAY = 10_000  # beyond this a client is better served by /api/alerts
 Position = tuple[int, str]

@@ -36,13 +36,13 @@ from starlette.requests import HTTPConnection
 from bevflow_services.gateway.auth_limits import LoginLimiter
 from bevflow_services.gateway.password_policy import check_password
 from bevflow_services.storage.access import ROLES, AccessStore, User
+from bevflow.units import NS_PER_S
 
 log = logging.getLogger(__name__)
 
 SESSION_COOKIE = "bevflow_session"
 TOKEN_PREFIX = "bvf_"
 LOCAL_USER = "local"  # who every request is when access control is off
-NS = 1_000_000_000
 # How long the first-run setup link works: it is written to the log, which others may read later.
 SETUP_LINK_S = 3600.0
 # Passwords hashed or checked at once. Each argon2 call takes 64 MiB and several cores for a
@@ -171,7 +171,7 @@ class Access:
         visitor holding it create an admin (``POST /api/auth/setup``); None otherwise."""
         if self.enabled and self.store.user_count() == 0:
             self.setup_token = secrets.token_urlsafe(24)
-            self.setup_expires_ns = self.clock() + int(SETUP_LINK_S * NS)
+            self.setup_expires_ns = self.clock() + int(SETUP_LINK_S * NS_PER_S)
         else:
             self.setup_token = None
         return self.setup_token
@@ -186,7 +186,7 @@ class Access:
     def start_session(self, user: User) -> str:
         secret = secrets.token_urlsafe(32)
         now = self.clock()
-        self.store.add_session(secret, user.name, now, now + int(self.session_s * NS))
+        self.store.add_session(secret, user.name, now, now + int(self.session_s * NS_PER_S))
         return secret
 
     # --- who is asking -------------------------------------------------------------------------

@@ -13,9 +13,9 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 from bevflow.schemas import CameraHealthEvent
+from bevflow.units import NS_PER_S
 
-NS = 1_000_000_000
-RECENT_NS = 30 * NS  # the window of ``recent_frames`` and ``recent_dropped``
+RECENT_NS = 30 * NS_PER_S  # the window of ``recent_frames`` and ``recent_dropped``
 CameraState = Literal["up", "down", "unknown"]
 
 
@@ -51,7 +51,7 @@ class CameraHealthBook:
     """Counters for a fixed set of cameras (the site's); messages from other cameras are refused."""
 
     def __init__(self, cameras: list[str], timeout_s: float = 5.0) -> None:
-        self.timeout_ns = int(timeout_s * NS)
+        self.timeout_ns = int(timeout_s * NS_PER_S)
         self._counters = {camera: CameraCounters() for camera in cameras}
 
     def __contains__(self, camera: str) -> bool:
@@ -86,7 +86,7 @@ class CameraHealthBook:
 
     def health(self, camera: str, now_ns: int) -> CameraHealth:
         c = self._counters[camera]
-        age_s = None if c.last_received_ns is None else max(0.0, (now_ns - c.last_received_ns) / NS)
+        age_s = None if c.last_received_ns is None else max(0.0, (now_ns - c.last_received_ns) / NS_PER_S)
         if c.down_event is not None:
             state: CameraState = "down"
             reason = c.down_event.reason or "reported down by the tracker"

@@ -19,12 +19,13 @@ from pydantic import BaseModel, Field
 from bevflow.analytics.intervals import crowded_intervals
 from bevflow.schemas import Event, iso_utc
 from bevflow.site import Site
+from bevflow.units import NS_PER_S
 
 from bevflow_services.gateway.history import EventQuery, HistoryStore, OccupancySample
-from bevflow_services.gateway.params import NS, to_ns
+from bevflow_services.gateway.params import to_ns
 from bevflow_services.gateway.routes.occupancy import downsample, site_crowded_level
 
-HOUR_NS = 3600 * NS
+HOUR_NS = 3600 * NS_PER_S
 PAGE = 1000
 
 
@@ -129,10 +130,10 @@ def _crowded(zone: str | None, times: np.ndarray, counts: np.ndarray, level: int
     if level is None or len(times) == 0:
         return []
     spans = []
-    for interval in crowded_intervals(times, counts, level, int(min_gap_s * NS), int(min_duration_s * NS), zone):
+    for interval in crowded_intervals(times, counts, level, int(min_gap_s * NS_PER_S), int(min_duration_s * NS_PER_S), zone):
         end_ns = interval.end_ns if interval.end_ns is not None else int(times[-1])
         spans.append(CrowdedSpan(zone=zone, level=level, start=iso_utc(interval.start_ns), end=iso_utc(end_ns),
-                                 start_ns=interval.start_ns, end_ns=end_ns, duration_s=(end_ns - interval.start_ns) / NS,
+                                 start_ns=interval.start_ns, end_ns=end_ns, duration_s=(end_ns - interval.start_ns) / NS_PER_S,
                                  peak=interval.peak, peak_time=iso_utc(interval.peak_ns)))
     return spans
 
@@ -168,12 +169,12 @@ def build_daily_report(site: Site, history: HistoryStore, day: date, zone_info: 
 
     events = all_events(history, start_ns, end_ns - 1)
     hours = (end_ns - start_ns) // HOUR_NS
-    labels = [datetime.fromtimestamp((start_ns + h * HOUR_NS) / NS, zone_info).strftime("%H:%M") for h in range(hours)]
+    labels = [datetime.fromtimestamp((start_ns + h * HOUR_NS) / NS_PER_S, zone_info).strftime("%H:%M") for h in range(hours)]
     violations = [e for e in events if e.type == "distance_violation" and start_ns <= e.start_ns < end_ns]
-    ended = [(e.end_ns - e.start_ns) / NS for e in violations if e.end_ns is not None]
+    ended = [(e.end_ns - e.start_ns) / NS_PER_S for e in violations if e.end_ns is not None]
     capacity = [CapacityAlert(id=e.id, zone=e.zone, start=iso_utc(e.start_ns),
                               end=None if e.end_ns is None else iso_utc(e.end_ns), start_ns=e.start_ns, end_ns=e.end_ns,
-                              duration_s=None if e.end_ns is None else (e.end_ns - e.start_ns) / NS,
+                              duration_s=None if e.end_ns is None else (e.end_ns - e.start_ns) / NS_PER_S,
                               peak=e.peak, capacity=e.capacity)
                 for e in events if e.type == "over_capacity"]
     curve = downsample(samples, [z.id for z in site.zones], step_s)

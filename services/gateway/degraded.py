@@ -21,8 +21,7 @@ from collections import deque
 from dataclasses import dataclass, field
 
 from bevflow_services.gateway.camera_health import CameraHealth
-
-NS = 1_000_000_000
+from bevflow.units import NS_PER_S
 
 
 @dataclass
@@ -37,9 +36,9 @@ class DataQuality:
 
     def __init__(self, late_s: float = 3.0, gap_s: float = 1.5, window_s: float = 30.0, drop_share: float = 0.2,
                  keep_s: float = 3600.0) -> None:
-        self.late_ns, self.gap_ns, self.window_ns = int(late_s * NS), int(gap_s * NS), int(window_s * NS)
+        self.late_ns, self.gap_ns, self.window_ns = int(late_s * NS_PER_S), int(gap_s * NS_PER_S), int(window_s * NS_PER_S)
         self.drop_share = drop_share
-        self.keep_ns = int(keep_s * NS)
+        self.keep_ns = int(keep_s * NS_PER_S)
         self._ticks: deque[tuple[int, int]] = deque()  # (capture ns, received ns), last window_s
         self._gaps: deque[tuple[int, int]] = deque()  # (received ns, gap ns) of ticks after a long gap
         self.periods: deque[DegradedPeriod] = deque()
@@ -65,7 +64,7 @@ class DataQuality:
 
     def due(self, now_ns: int) -> bool:
         """Whether ``reasons`` would check again at ``now_ns`` (at most once a second)."""
-        return not self._checked_ns or now_ns - self._checked_ns >= NS
+        return not self._checked_ns or now_ns - self._checked_ns >= NS_PER_S
 
     def reasons(self, now_ns: int, cameras: list[CameraHealth]) -> list[str]:
         """What is wrong with the live data now (empty: nothing known); updates the periods."""
@@ -82,11 +81,11 @@ class DataQuality:
         if self._ticks:
             capture, received = self._ticks[-1]
             if received - capture > self.late_ns:
-                found.append(f"tracks arrive {(received - capture) / NS:.1f} s after capture: the tracker or detector is behind")
+                found.append(f"tracks arrive {(received - capture) / NS_PER_S:.1f} s after capture: the tracker or detector is behind")
         recent_gaps = [g for r, g in self._gaps if now_ns - r <= self.window_ns]
         if recent_gaps:
-            found.append(f"the tracker skipped ticks: {len(recent_gaps)} gap(s) up to {max(recent_gaps) / NS:.1f} s "
-                         f"in the last {self.window_ns // NS} s")
+            found.append(f"the tracker skipped ticks: {len(recent_gaps)} gap(s) up to {max(recent_gaps) / NS_PER_S:.1f} s "
+                         f"in the last {self.window_ns // NS_PER_S} s")
         return found
 
     def _record(self, now_ns: int, found: list[str]) -> None:
@@ -110,7 +109,7 @@ def camera_reasons(cameras: list[CameraHealth], late_ns: int, drop_share: float)
             found.append(f"camera {c.camera} down: {c.reason}")
         elif c.state == "up" and c.last_capture_ns is not None and c.last_received_ns is not None \
                 and c.last_received_ns - c.last_capture_ns > late_ns:
-            found.append(f"camera {c.camera} is {(c.last_received_ns - c.last_capture_ns) / NS:.1f} s behind")
+            found.append(f"camera {c.camera} is {(c.last_received_ns - c.last_capture_ns) / NS_PER_S:.1f} s behind")
         elif c.state == "up" and c.recent_frames and c.recent_dropped / (c.recent_frames + c.recent_dropped) > drop_share:
             share = c.recent_dropped / (c.recent_frames + c.recent_dropped)
             found.append(f"camera {c.camera} lost {share:.0%} of its frames recently")

@@ -18,8 +18,7 @@ import numpy as np
 from bevflow.analytics.contacts import contacts
 from bevflow.analytics.trajectories import TrackHistory, Trajectory
 from bevflow.schemas import Contact, Event, Occupancy, Tracks
-
-NS = 1_000_000_000
+from bevflow.units import NS_PER_S
 
 
 @dataclass(frozen=True)
@@ -113,7 +112,7 @@ class InMemoryHistory:
     ) -> None:
         if retention_s <= 0:
             raise ValueError(f"retention_s must be positive, got {retention_s}")
-        self.retention_ns = int(retention_s * NS)
+        self.retention_ns = int(retention_s * NS_PER_S)
         self.max_events = max_events
         self._lock = threading.Lock()
         self._seconds: deque[OccupancySample] = deque()  # the newest one may still grow
@@ -123,7 +122,7 @@ class InMemoryHistory:
 
     # --- occupancy -----------------------------------------------------------------------------
     def add_occupancy(self, occupancy: Occupancy) -> None:
-        start_ns = occupancy.time_ns // NS * NS
+        start_ns = occupancy.time_ns // NS_PER_S * NS_PER_S
         zones = {z.id: z.count for z in occupancy.zones}
         with self._lock:
             last = self._seconds[-1] if self._seconds else None

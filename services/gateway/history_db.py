@@ -19,6 +19,7 @@ from bevflow.alert_lease import LEASE_S
 from bevflow.analytics.trajectories import TrackHistory, Trajectory
 from bevflow.capture_time import CaptureWindow
 from bevflow.schemas import Contact, Event, Occupancy, Tracks
+from bevflow.units import NS_PER_S
 
 from bevflow_services.cli import UserError
 from bevflow_services.gateway.history import EventQuery, HistoryStore, InMemoryHistory, OccupancySample
@@ -31,8 +32,6 @@ from bevflow_services.storage import (
     StorageError,
     TrackSummary,
 )
-
-NS = 1_000_000_000
 
 
 def _sample(point: OccupancyPoint) -> OccupancySample:
@@ -54,7 +53,7 @@ class DatabaseHistory:
     def __init__(self, db: HistoryDatabase, open_range_s: float = 86_400.0, *,
                  clock: Callable[[], int] = time.time_ns, window: CaptureWindow | None = None) -> None:
         self.db = db
-        self.open_range_ns = int(open_range_s * NS)
+        self.open_range_ns = int(open_range_s * NS_PER_S)
         self.clock = clock
         self.window = window if window is not None else CaptureWindow.from_environment()
 
@@ -67,7 +66,7 @@ class DatabaseHistory:
     def retention_ns(self) -> int:
         """How far back occupancy reaches: the recorder's retention (the default before one ran)."""
         policy = self.db.retention() or RetentionPolicy()
-        return int(policy.occupancy_s * NS)
+        return int(policy.occupancy_s * NS_PER_S)
 
     # --- the live stream: the recorder writes it ---------------------------------------------
     def add_occupancy(self, occupancy: Occupancy) -> None:
@@ -89,7 +88,7 @@ class DatabaseHistory:
     def events(self, query: EventQuery, limit: int, offset: int = 0) -> tuple[list[Event], int]:
         wanted = EventFilter(types=query.types, zone=query.zone, track=query.track, active=query.active,
                              since_ns=query.since_ns, until_ns=self._until(query.until_ns),
-                             renewed_since_ns=self.clock() - int(LEASE_S * NS))
+                             renewed_since_ns=self.clock() - int(LEASE_S * NS_PER_S))
         return self.db.events(wanted, limit, offset)
 
     def event(self, event_id: str) -> Event | None:

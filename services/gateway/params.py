@@ -16,11 +16,11 @@ from pydantic import BaseModel
 from starlette.requests import HTTPConnection
 
 from bevflow.site import Site
+from bevflow.units import NS_PER_S
 
 from bevflow_services.gateway.state import GatewayState
 
 T = TypeVar("T")
-NS = 1_000_000_000
 MAX_LIMIT = 1000
 EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
 
@@ -61,7 +61,7 @@ def to_ns(moment: datetime) -> int:
     if moment.tzinfo is None:
         moment = moment.replace(tzinfo=UTC)
     delta = moment - EPOCH
-    return (delta.days * 86400 + delta.seconds) * NS + delta.microseconds * 1000
+    return (delta.days * 86400 + delta.seconds) * NS_PER_S + delta.microseconds * 1000
 
 
 @dataclass(frozen=True)
@@ -90,7 +90,7 @@ def recent(window: TimeRange, last_s: float | None, newest_ns: int | None) -> Ti
         raise HTTPException(400, "give either since or last_s, not both")
     if newest_ns is None:
         return window
-    return TimeRange(newest_ns - int(last_s * NS), window.until_ns)
+    return TimeRange(newest_ns - int(last_s * NS_PER_S), window.until_ns)
 
 
 def check_zone(site: Site, zone: str | None) -> str | None:

@@ -26,8 +26,8 @@ from reportlab.lib.units import mm
 from reportlab.platypus import Paragraph, SimpleDocTemplate, Spacer, Table, TableStyle
 
 from bevflow_services.gateway.daily_report import HOUR_NS, DailyReport
+from bevflow.units import NS_PER_S
 
-NS = 1_000_000_000
 PALETTE = [colors.HexColor(c) for c in ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b",
                                         "#e377c2", "#7f7f7f", "#bcbd22", "#17becf")]
 WIDTH, HEIGHT = 720, 220
@@ -36,7 +36,7 @@ WIDTH, HEIGHT = 720, 220
 def local(time_ns: int | None, zone: tzinfo, with_date: bool = False) -> str:
     if time_ns is None:
         return "-"
-    moment = datetime.fromtimestamp(time_ns / NS, zone)
+    moment = datetime.fromtimestamp(time_ns / NS_PER_S, zone)
     return moment.strftime("%Y-%m-%d %H:%M:%S" if with_date else "%H:%M:%S")
 
 

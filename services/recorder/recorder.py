@@ -22,9 +22,10 @@ import time
 from collections import Counter
 from collections.abc import Callable
 
-from bevflow.alert_lease import LEASE_S, NS, RateLimit
+from bevflow.alert_lease import LEASE_S, RateLimit
 from bevflow.capture_time import CaptureWindow
 from bevflow.schemas import Event, Occupancy, OpenAlerts, Tracks, zones_named
+from bevflow.units import NS_PER_S
 
 from bevflow_services.storage import Batch, HistoryDatabase, StorageUnavailable, TrackSampler
 
@@ -111,7 +112,7 @@ class Recorder:
 
     def end_lapsed_alerts(self) -> int:
         """End the stored open alerts that nobody renewed within the lease; returns how many."""
-        ended = self.db.end_lapsed_events(self.clock() - int(LEASE_S * NS))
+        ended = self.db.end_lapsed_events(self.clock() - int(LEASE_S * NS_PER_S))
         if ended:
             self.counts["lapsed_alerts"] += ended
             log.warning("%d open alerts ended by themselves: no renewal from the tracker for their lease", ended)

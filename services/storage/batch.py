@@ -20,8 +20,9 @@ from dataclasses import dataclass, field
 from typing import TypeVar
 
 from bevflow.schemas import Event, Occupancy, Tracks
+from bevflow.units import NS_PER_S
 
-from bevflow_services.storage.records import NS, SITE
+from bevflow_services.storage.records import SITE
 
 K = TypeVar("K")
 V = TypeVar("V")
@@ -51,7 +52,7 @@ class Batch:
         return len(self.occupancy) + len(self.events) + len(self.points) + len(self.renewals)
 
     def add_occupancy(self, occupancy: Occupancy) -> None:
-        second = occupancy.time_ns // NS * NS
+        second = occupancy.time_ns // NS_PER_S * NS_PER_S
         counts = [(SITE, occupancy.total), *((z.id, z.count) for z in occupancy.zones)]
         for zone, count in counts:
             key = (second, zone)
@@ -100,7 +101,7 @@ class TrackSampler:
     def __init__(self, period_s: float = 1.0, last_sampled_ns: int | None = None) -> None:
         if period_s <= 0:
             raise ValueError(f"period_s must be positive, got {period_s}")
-        self.period_ns = int(period_s * NS)
+        self.period_ns = int(period_s * NS_PER_S)
         self._last_bucket = None if last_sampled_ns is None else last_sampled_ns // self.period_ns
 
     def keep(self, time_ns: int) -> bool:

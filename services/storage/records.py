@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-NS = 1_000_000_000
+
 DAY_S = 86_400.0
 SITE = ""  # the zone key of site-wide counts (zone ids are never empty)
 

@@ -13,7 +13,8 @@ built from all the seconds of it that were stored.
 from __future__ import annotations
 
 from bevflow_services.storage.backend import Backend, Transaction
-from bevflow_services.storage.records import NS, RetentionPolicy, RetentionResult
+from bevflow_services.storage.records import RetentionPolicy, RetentionResult
+from bevflow.units import NS_PER_S
 
 ROLL_UP = (
     "INSERT INTO occupancy_coarse (time_ns, zone, step_s, max_people, mean_people, seconds) "
@@ -84,15 +85,15 @@ def apply_retention(backend: Backend, policy: RetentionPolicy, now_ns: int, max_
                     latest_ns: int | None = None) -> RetentionResult:
     """Apply ``policy`` as of ``now_ns`` (capture-time nanoseconds), up to ``max_span_s`` per table;
     with ``latest_ns``, first delete what lies beyond it (``purge_future``)."""
-    span = max(int(max_span_s * NS), 1)
-    step = policy.coarse_step_s * NS
+    span = max(int(max_span_s * NS_PER_S), 1)
+    step = policy.coarse_step_s * NS_PER_S
     deleted: dict[str, int] = {}
     done = True
     if latest_ns is not None:
         deleted["future"] = purge_future(backend, latest_ns)
 
     # The fine cut-off is on a coarse step's edge, so a coarse bucket gets all its seconds at once.
-    fine_cutoff = (now_ns - int(policy.fine_s * NS)) // step * step
+    fine_cutoff = (now_ns - int(policy.fine_s * NS_PER_S)) // step * step
     rolled = 0
     with backend.transaction() as tx:
         upto = _slice_end(tx, "occupancy", "time_ns", fine_cutoff, span, step)
@@ -108,17 +109,17 @@ def apply_retention(backend: Backend, policy: RetentionPolicy, now_ns: int, max_
             deleted[table] = 0 if upto is None else tx.rowcount(f"DELETE FROM {table} WHERE {column} < ?", [upto])
             done &= _finished(tx, table, column, cutoff)
 
-    delete("occupancy_coarse", "time_ns", now_ns - int(policy.occupancy_s * NS))
-    delete("track_points", "time_ns", now_ns - int(policy.tracks_s * NS))
+    delete("occupancy_coarse", "time_ns", now_ns - int(policy.occupancy_s * NS_PER_S))
+    delete("track_points", "time_ns", now_ns - int(policy.tracks_s * NS_PER_S))
 
-    track_cutoff = now_ns - int(policy.tracks_s * NS)
+    track_cutoff = now_ns - int(policy.tracks_s * NS_PER_S)
     with backend.transaction() as tx:
         tx.execute("DELETE FROM track_zones WHERE track_id IN (SELECT track_id FROM tracks WHERE last_ns < ?)", [track_cutoff])
         deleted["tracks"] = tx.rowcount("DELETE FROM tracks WHERE last_ns < ?", [track_cutoff])
 
     # An alert goes once it has been over for the retention time; one never ended (its tracker
     # died mid-alert) goes by its start.
-    event_cutoff = now_ns - int(policy.events_s * NS)
+    event_cutoff = now_ns - int(policy.events_s * NS_PER_S)
     old_events = "SELECT id FROM events WHERE COALESCE(end_ns, start_ns) < ?"
     with backend.transaction() as tx:
         tx.execute(f"DELETE FROM event_tracks WHERE event_id IN ({old_events})", [event_cutoff])

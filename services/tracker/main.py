@@ -24,11 +24,12 @@ import threading
 import time
 from pathlib import Path
 
-from bevflow.alert_lease import NS, RENEW_EVERY_S
+from bevflow.alert_lease import RENEW_EVERY_S
 from bevflow.calibration.drift import DriftConfig
 from bevflow.live.assembler import TickAssembler
 from bevflow.live.site_tracker import SiteTracker
 from bevflow.schemas import CameraCylinders, CameraHealthEvent, Event, Occupancy, OpenAlerts, Tracks
+from bevflow.units import NS_PER_S
 
 from bevflow_services import bus
 from bevflow_services.cli import UserError
@@ -122,7 +123,7 @@ class OpenAlertBook:
     def __init__(self, site_id: str, renew_every_s: float = RENEW_EVERY_S) -> None:
         self.site_id = site_id
         self.ids: set[str] = set()
-        self.renew_every_ns = int(renew_every_s * NS)
+        self.renew_every_ns = int(renew_every_s * NS_PER_S)
         self._next_ns: int | None = None
 
     def observe(self, event: Event) -> None:

@@ -12,12 +12,12 @@ A flood is also bounded where it arrives: each receiver takes alerts at ``RATE_P
 with bursts of ``BURST`` (the tracker's default alert cache, which a restarted recorder fetches at
 once) and refuses and counts the rest.
 
->>> lease_over(renewed_ns=0, now_ns=int(LEASE_S * NS))
+>>> lease_over(renewed_ns=0, now_ns=int(LEASE_S * NS_PER_S))
 False
->>> lease_over(renewed_ns=0, now_ns=int(LEASE_S * NS) + 1)
+>>> lease_over(renewed_ns=0, now_ns=int(LEASE_S * NS_PER_S) + 1)
 True
 >>> bucket = RateLimit(rate_per_s=1.0, burst=2)
->>> [bucket.allow(0), bucket.allow(0), bucket.allow(0), bucket.allow(NS)]
+>>> [bucket.allow(0), bucket.allow(0), bucket.allow(0), bucket.allow(NS_PER_S)]
 [True, True, False, True]
 """
 
@@ -25,7 +25,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-NS = 1_000_000_000
+from bevflow.units import NS_PER_S
+
 LEASE_S = 60.0
 # Four renewals per lease: one or two lost on a congested link do not end a real alert.
 RENEW_EVERY_S = 15.0
@@ -39,7 +40,7 @@ MAX_OPEN = 20_000
 
 def lease_over(renewed_ns: int, now_ns: int, lease_s: float = LEASE_S) -> bool:
     """Whether an open alert last renewed at ``renewed_ns`` has lapsed at ``now_ns``."""
-    return now_ns - renewed_ns > int(lease_s * NS)
+    return now_ns - renewed_ns > int(lease_s * NS_PER_S)
 
 
 @dataclass
@@ -56,7 +57,7 @@ class RateLimit:
         if self._last_ns is None:
             self._tokens = float(self.burst)
         else:
-            elapsed_s = max(0, now_ns - self._last_ns) / NS
+            elapsed_s = max(0, now_ns - self._last_ns) / NS_PER_S
             self._tokens = min(float(self.burst), self._tokens + elapsed_s * self.rate_per_s)
         self._last_ns = now_ns
         if self._tokens < 1.0:

@@ -17,8 +17,8 @@ rule would refuse the true messages that follow until the wall clock caught up (
 Both bounds can be set per process with ``BEVFLOW_CLOCK_FUTURE_S`` and ``BEVFLOW_CLOCK_PAST_S``.
 
 >>> window = CaptureWindow(future_s=5.0, past_s=60.0)
->>> now = 1_700_000_000 * NS
->>> window.too_new(now + 4 * NS, now), window.too_new(2**63 - 1, now), window.too_old(now - 61 * NS, now)
+>>> now = 1_700_000_000 * NS_PER_S
+>>> window.too_new(now + 4 * NS_PER_S, now), window.too_new(2**63 - 1, now), window.too_old(now - 61 * NS_PER_S, now)
 (False, True, True)
 """
 
@@ -32,7 +32,8 @@ from typing import Any
 
 from pydantic import BaseModel
 
-NS = 1_000_000_000
+from bevflow.units import NS_PER_S
+
 # A few seconds: NTP keeps hosts within milliseconds, and nothing is captured in the future.
 FUTURE_S = 5.0
 # An hour: the gateway's live history; older data is a replay or a stuck clock, not live.
@@ -54,11 +55,11 @@ class CaptureWindow:
 
     def latest_ns(self, now_ns: int) -> int:
         """The newest capture time trusted at ``now_ns``."""
-        return now_ns + int(self.future_s * NS)
+        return now_ns + int(self.future_s * NS_PER_S)
 
     def earliest_ns(self, now_ns: int) -> int:
         """The oldest capture time still live at ``now_ns``."""
-        return now_ns - int(self.past_s * NS)
+        return now_ns - int(self.past_s * NS_PER_S)
 
     def too_new(self, time_ns: int, now_ns: int) -> bool:
         return time_ns > self.latest_ns(now_ns)

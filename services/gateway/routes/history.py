@@ -20,11 +20,11 @@ from fastapi.responses import Response
 from pydantic import BaseModel, Field
 
 from bevflow.schemas import EVENT_TYPES, Event, iso_utc
+from bevflow.units import NS_PER_S
 
 from bevflow_services.gateway.auth import AccessDep, Operator
 from bevflow_services.gateway.history import HistoryStore, OccupancySample
 from bevflow_services.gateway.params import (
-    NS,
     Offset,
     Page,
     SiteDep,
@@ -152,7 +152,7 @@ def event_row(event: Event) -> EventRow:
         id=event.id, type=event.type, zone=event.zone, tracks=list(event.tracks),
         start=iso_utc(event.start_ns), end=None if event.end_ns is None else iso_utc(event.end_ns),
         start_ns=event.start_ns, end_ns=event.end_ns,
-        duration_s=None if event.end_ns is None else (event.end_ns - event.start_ns) / NS,
+        duration_s=None if event.end_ns is None else (event.end_ns - event.start_ns) / NS_PER_S,
         active=event.end_ns is None, event=event,
     )
 
@@ -233,7 +233,7 @@ def track_history(
     summaries, total = summaries_of(window.since_ns, window.until_ns, check_zone(site, zone), limit, offset)
     rows = [TrackSummaryView(
         id=s.track_id, first=iso_utc(s.first_ns), last=iso_utc(s.last_ns), first_ns=s.first_ns, last_ns=s.last_ns,
-        duration_s=(s.last_ns - s.first_ns) / NS, points=s.points,
+        duration_s=(s.last_ns - s.first_ns) / NS_PER_S, points=s.points,
         zones=[ZoneVisitView(zone=v.zone, first=iso_utc(v.first_ns), last=iso_utc(v.last_ns), first_ns=v.first_ns,
                              last_ns=v.last_ns) for v in s.zones]) for s in summaries]
     if fmt == "csv":

@@ -15,9 +15,10 @@ from pydantic import BaseModel, Field
 
 from bevflow.analytics.intervals import crowded_intervals
 from bevflow.schemas import CrowdedInterval, iso_utc
+from bevflow.units import NS_PER_S
 
 from bevflow_services.gateway.history import OccupancySample
-from bevflow_services.gateway.params import NS, LastS, SiteDep, StateDep, TimeRangeDep, ZoneParam, check_zone, recent
+from bevflow_services.gateway.params import LastS, SiteDep, StateDep, TimeRangeDep, ZoneParam, check_zone, recent
 from bevflow_services.gateway.routes.occupancy import site_crowded_level
 
 router = APIRouter(prefix="/api", tags=["occupancy"])
@@ -40,7 +41,7 @@ def _view(interval: CrowdedInterval, last: OccupancySample, count_now: int) -> C
         **interval.model_dump(),
         start=iso_utc(interval.start_ns),
         end=iso_utc(end_ns),
-        duration_s=(end_ns - interval.start_ns) / NS,
+        duration_s=(end_ns - interval.start_ns) / NS_PER_S,
         ongoing=end_ns == last.time_ns and count_now > interval.level,
     )
 
@@ -77,7 +78,7 @@ def intervals(
         if zone_level is None:
             continue
         counts = np.array([s.total if zone_id is None else s.zones.get(zone_id, 0) for s in samples])
-        for interval in crowded_intervals(times, counts, zone_level, int(min_gap_s * NS), int(min_duration_s * NS), zone_id):
+        for interval in crowded_intervals(times, counts, zone_level, int(min_gap_s * NS_PER_S), int(min_duration_s * NS_PER_S), zone_id):
             found.append(_view(interval, samples[-1], int(counts[-1])))
     found.sort(key=lambda i: (i.start_ns, i.zone or ""))
     return Intervals(items=found)

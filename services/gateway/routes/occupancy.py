@@ -10,10 +10,10 @@ from pydantic import BaseModel, Field
 
 from bevflow.schemas import iso_utc
 from bevflow.site import Site
+from bevflow.units import NS_PER_S
 
 from bevflow_services.gateway.history import OccupancySample
 from bevflow_services.gateway.params import (
-    NS,
     LastS,
     SiteDep,
     StateDep,
@@ -135,7 +135,7 @@ def downsample(samples: list[OccupancySample], zone_ids: list[str], step_s: int)
     """Group one-second samples into ``step_s`` steps, keeping each step's maximum."""
     if not samples:
         return OccupancyHistory(step_s=step_s, time_ns=[], total=[], zones={z: [] for z in zone_ids})
-    seconds = np.array([s.time_ns // NS for s in samples], dtype=np.int64)
+    seconds = np.array([s.time_ns // NS_PER_S for s in samples], dtype=np.int64)
     steps, first = np.unique(seconds // step_s, return_index=True)
 
     def column(values: list[int]) -> list[int]:
@@ -143,7 +143,7 @@ def downsample(samples: list[OccupancySample], zone_ids: list[str], step_s: int)
 
     return OccupancyHistory(
         step_s=step_s,
-        time_ns=(steps * step_s * NS).tolist(),
+        time_ns=(steps * step_s * NS_PER_S).tolist(),
         total=column([s.total for s in samples]),
         zones={z: column([s.zones.get(z, 0) for s in samples]) for z in zone_ids},
     )

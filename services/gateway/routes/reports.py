@@ -19,8 +19,9 @@ from fastapi.responses import HTMLResponse, Response
 
 from bevflow_services.gateway.auth_headers import content_security_policy
 from bevflow_services.gateway.daily_report import DailyReport, build_daily_report
-from bevflow_services.gateway.params import NS, StateDep
+from bevflow_services.gateway.params import StateDep
 from bevflow_services.gateway.report_render import STYLE_HASH, render_html, render_pdf
+from bevflow.units import NS_PER_S
 
 router = APIRouter(prefix="/api/reports", tags=["reports"])
 
@@ -48,7 +49,7 @@ def time_zone(name: str) -> tzinfo:
 def daily_report(state: StateDep, day: DateParam = None, tz: TimezoneParam = "UTC", fmt: ReportFormat = "json") -> Any:
     zone = time_zone(tz)
     if day is None:
-        day = datetime.fromtimestamp(state.clock() / NS, zone).date()
+        day = datetime.fromtimestamp(state.clock() / NS_PER_S, zone).date()
     if not FIRST_DAY <= day <= LAST_DAY:  # capture times are int64 nanoseconds since 1970
         raise HTTPException(400, f"date: {day.isoformat()} is outside {FIRST_DAY} to {LAST_DAY}")
     report = build_daily_report(state.site, state.history, day, zone, tz)

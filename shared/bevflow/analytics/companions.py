@@ -35,7 +35,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from bevflow.analytics.positions import NS_PER_S, seconds_to_ns
+from bevflow.analytics.positions import seconds_to_ns
+from bevflow.units import NS_PER_S
 
 COMPANION_SHARE = 0.8  # of the judging window's ticks a pair must spend close
 FORGET_S = 10.0  # an id unseen this long is forgotten (its track has ended)

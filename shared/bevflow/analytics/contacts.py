@@ -21,8 +21,7 @@ import numpy as np
 
 from bevflow.analytics.trajectories import TrackHistory
 from bevflow.schemas import Contact
-
-NS_PER_S = 1e9
+from bevflow.units import NS_PER_S
 
 
 def contacts(

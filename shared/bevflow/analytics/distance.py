@@ -59,7 +59,6 @@ from scipy.spatial import cKDTree
 from bevflow.analytics.positions import (
     Clock,
     FloatArray,
-    NS_PER_S,
     IntArray,
     check_positions,
     pair_ids,
@@ -69,6 +68,7 @@ from bevflow.analytics.positions import (
 from bevflow.analytics.zones import ZoneIndex
 from bevflow.schemas import DistanceViolation
 from bevflow.site import Thresholds, Zone
+from bevflow.units import NS_PER_S
 
 CLOSE, VIOLATION, GROUP = 0, 1, 2
 NO_WALK = -1  # walk_from_ns of a pair not walking together now

@@ -22,8 +22,7 @@ import math
 from dataclasses import dataclass
 
 from bevflow.schemas import Contact
-
-NS_PER_S = 1_000_000_000
+from bevflow.units import NS_PER_S
 
 
 @dataclass(frozen=True)

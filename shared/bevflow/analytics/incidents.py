@@ -31,10 +31,11 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from bevflow.analytics.companions import Companions
-from bevflow.analytics.positions import NS_PER_S, FloatArray, IntArray, seconds_to_ns
+from bevflow.analytics.positions import FloatArray, IntArray, seconds_to_ns
 from bevflow.analytics.zones import ZoneIndex
 from bevflow.schemas import DistanceIncident
 from bevflow.site import Thresholds, Zone
+from bevflow.units import NS_PER_S
 
 # (people at once, seconds) from which an incident is of that severity; the first that applies wins.
 Severity = Literal["low", "medium", "high"]

@@ -10,11 +10,12 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from bevflow.units import NS_PER_S
+
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
 MAX_TRACK_ID = 2**31 - 1
-NS_PER_S = 1_000_000_000
 
 
 def check_positions(ids: ArrayLike, xy: ArrayLike) -> tuple[IntArray, FloatArray]:

@@ -6,9 +6,10 @@ from __future__ import annotations
 import pytest
 
 from bevflow.site import Site
+from bevflow.units import NS_PER_S
 
 from bevflow_services.gateway import GatewayState
-from bevflow_services.gateway.auth import NS, SETUP_LINK_S
+from bevflow_services.gateway.auth import SETUP_LINK_S
 from bevflow_services.gateway.password_policy import PasswordError, check_password
 from tests.services.gateway.access import PASSWORD, secured_client
 
@@ -41,12 +42,12 @@ def test_weak_passwords_are_refused_over_rest(site: Site, state: GatewayState, p
 
 
 def test_the_setup_link_expires(site: Site, state: GatewayState) -> None:
-    now = [1_000 * NS]
+    now = [1_000 * NS_PER_S]
     with secured_client(site, state, clock=lambda: now[0]) as (client, secure):
         for user in secure.access.store.users():
             secure.access.store.remove_user(user.name)
         token = secure.access.prepare_setup()
-        now[0] += int(SETUP_LINK_S * NS)
+        now[0] += int(SETUP_LINK_S * NS_PER_S)
         late = client.post("/api/auth/setup", json={"token": token, "name": "root", "password": "long enough pw"})
         assert late.status_code == 403
         assert secure.access.store.user_count() == 0
