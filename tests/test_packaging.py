@@ -10,7 +10,11 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGE_ROOTS = {"bevflow": ROOT / "shared" / "bevflow", "bevflow_services": ROOT / "services", "bevflow_dashboard": ROOT / "dashboard"}
+PACKAGE_ROOTS = {
+    "bevflow": ROOT / "shared" / "bevflow",
+    "bevflow_services": ROOT / "services" / "bevflow_services",
+    "bevflow_dashboard": ROOT / "dashboard" / "bevflow_dashboard",
+}
 
 
 def _package_folders() -> list[str]:

@@ -16,7 +16,7 @@ from tests.dashboard.cdp import Chromium, Page, find_chromium
 from tests.dashboard.scene import Feeder, Scene
 from tests.dashboard.server import serve
 
-DASHBOARD_DIR = Path(__file__).resolve().parents[2] / "dashboard"
+DASHBOARD_DIR = Path(__file__).resolve().parents[2] / "dashboard" / "bevflow_dashboard"
 
 
 @pytest.fixture(scope="session")

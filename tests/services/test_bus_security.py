@@ -187,8 +187,8 @@ def test_config_from_args_reads_the_site(tmp_path: Path, pki: dict[str, Path]) -
     [("missing.yaml", "missing.yaml: cannot read the site file"), ("bad.yaml", "bus.auth: never write the password")],
 )
 def test_the_router_reports_a_site_it_cannot_use(tmp_path: Path, site: str, message: str) -> None:
-    from bevflow_services.cli import UserError
     from bevflow_services.cli.serve import run_service
+    from bevflow_services.runtime import UserError
 
     site_file(tmp_path, "auth: {user: u, password: x}", name="bad.yaml")
     with pytest.raises(UserError, match=message):

@@ -1,5 +1,5 @@
-"""Every ">>>" example in the services runs. They are imported under their package names
-(bevflow_services), which --doctest-modules cannot do for a folder named services/."""
+"""Every ">>>" example in the services runs, each module imported under its package name
+(bevflow_services.…) as the installed package is."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-SERVICES = Path(__file__).resolve().parents[2] / "services"
+SERVICES = Path(__file__).resolve().parents[2] / "services" / "bevflow_services"
 
 
 def _modules_with_examples() -> list[str]:

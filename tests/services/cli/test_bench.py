@@ -9,8 +9,8 @@ import pytest
 
 from bevflow_services.benchmarks import suite
 from bevflow_services.benchmarks.suite import HEADLINE_KEYS, Settings
-from bevflow_services.cli import UserError
 from bevflow_services.cli import bench
+from bevflow_services.runtime import UserError
 
 # Settings small enough for a test: the point is the command's output, never its speed.
 TINY = Settings(cylinder_boxes=(5, 50), cylinder_repeats=1, cylinder_reference_repeats=1, cylinder_reference_max_boxes=5,

@@ -9,7 +9,6 @@ import cv2
 import numpy as np
 import pytest
 
-import bevflow_services.cli as cli
 from bevflow.camera import rotation_from_ypr
 from bevflow.site import dump_site, load_site, parse_site
 from bevflow.sim.presets import preset
@@ -33,12 +32,6 @@ cameras:
 """
 DOOR_POSITION = np.array([2.0, 3.0, 3.3])
 DOOR_YPR = (20.0, 1.0, 0.0)
-
-
-@pytest.fixture(autouse=True)
-def calibrate_command(monkeypatch: pytest.MonkeyPatch) -> None:
-    if "calibrate" not in cli.COMMANDS:
-        monkeypatch.setattr(cli, "COMMANDS", [*cli.COMMANDS, "calibrate"])
 
 
 @pytest.fixture(scope="module")

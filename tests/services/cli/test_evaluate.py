@@ -6,9 +6,10 @@ from pathlib import Path
 
 import pytest
 
-from bevflow_services.cli import UserError, main
+from bevflow_services.cli import main
 from bevflow_services.cli import evaluate
 from bevflow_services.cli.evaluate import SUITE_MODULE, parse_frame_slice
+from bevflow_services.runtime import UserError
 from tests.bevflow.datasets.test_wildtrack import write_fake_wildtrack
 
 HEADLINE = {"MODA", "MODP", "precision", "recall", "F1", "APE", "method", "frames"}

@@ -7,15 +7,8 @@ from pathlib import Path
 import cv2
 import pytest
 
-import bevflow_services.cli as cli
 from bevflow.site import load_site
 from bevflow_services.cli import main
-
-
-@pytest.fixture(autouse=True)
-def plan_command(monkeypatch: pytest.MonkeyPatch) -> None:
-    if "plan" not in cli.COMMANDS:
-        monkeypatch.setattr(cli, "COMMANDS", [*cli.COMMANDS, "plan"])
 
 
 def test_plan_writes_a_site_and_a_map(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:

@@ -13,7 +13,8 @@ import textwrap
 import pytest
 
 from bevflow_services import bus
-from bevflow_services.cli import UserError, serve
+from bevflow_services.cli import serve
+from bevflow_services.runtime import UserError
 
 FAKE_TRACKER = '''
 """Track people (a stand-in)."""
@@ -31,10 +32,40 @@ def main(args):
 '''
 
 
+def _fake_tracker():
+    from fakesvc.tracker import main
+    return main
+
+
+def _fake_detector():
+    from fakesvc.detector import main
+    return main
+
+
+def _fake_projector():
+    from fakesvc.projector import main
+    return main
+
+
+def _fake_ingest():
+    from fakesvc.ingest import main
+    return main
+
+
+def _fake_gateway():
+    from fakesvc.gateway import main  # the package has no gateway
+    return main
+
+
+FAKE_LOADERS = {"tracker": _fake_tracker, "detector": _fake_detector, "projector": _fake_projector,
+                "ingest": _fake_ingest, "gateway": _fake_gateway}
+
+
 @pytest.fixture
 def package(tmp_path, monkeypatch):
-    """A package ``fakesvc`` with a working tracker, a detector that needs a missing third-party
-    package, a projector with a broken internal import, and an ingest without ``main``."""
+    """Loaders for a package ``fakesvc`` with a working tracker, a detector that needs a missing
+    third-party package, a projector with a broken internal import, an ingest without ``main`` and
+    no gateway."""
     root = tmp_path / "fakesvc"
     files = {
         "__init__.py": "",
@@ -51,21 +82,21 @@ def package(tmp_path, monkeypatch):
         (root / name).parent.mkdir(parents=True, exist_ok=True)
         (root / name).write_text(textwrap.dedent(text))
     monkeypatch.syspath_prepend(str(tmp_path))
-    yield "fakesvc"
+    yield FAKE_LOADERS
     for name in [m for m in sys.modules if m == "fakesvc" or m.startswith("fakesvc.")]:
         del sys.modules[name]
 
 
 def test_runs_the_service_with_common_and_own_flags(package):
     argv = ["--site", "sites/hall-a.yaml", "--max-wait-ms", "90", "-m", "client", "-e", "tcp/10.0.0.2:7447"]
-    assert serve.run_service("tracker", argv, package=package) == 7
+    assert serve.run_service("tracker", argv, loaders=package, package="fakesvc") == 7
     args = sys.modules["fakesvc.tracker.main"].CALLS[-1]
     assert (args.site, args.site_id, args.max_wait_ms, args.service) == ("sites/hall-a.yaml", None, 90, "tracker")
     assert bus.config_from_args(args) == bus.BusConfig(mode="client", connect=("tcp/10.0.0.2:7447",))
 
 
 def test_site_id_can_be_given(package):
-    serve.run_service("tracker", ["--site", "demo", "--site-id", "terminal-2"], package=package)
+    serve.run_service("tracker", ["--site", "demo", "--site-id", "terminal-2"], loaders=package, package="fakesvc")
     assert sys.modules["fakesvc.tracker.main"].CALLS[-1].site_id == "terminal-2"
 
 
@@ -82,7 +113,7 @@ def test_site_id_can_be_given(package):
 )
 def test_errors(package, service, argv, error, message):
     with pytest.raises(error, match=message):
-        serve.run_service(service, argv, package=package)
+        serve.run_service(service, argv, loaders=package, package="fakesvc")
 
 
 @pytest.mark.parametrize(
@@ -96,7 +127,7 @@ def test_errors(package, service, argv, error, message):
 )
 def test_bad_command_lines_exit_with_usage(package, argv, capsys):
     with pytest.raises(SystemExit) as exit_info:
-        serve.run_service("tracker", argv, package=package)
+        serve.run_service("tracker", argv, loaders=package, package="fakesvc")
     assert exit_info.value.code == 2
     assert "usage: bevflow serve tracker" in capsys.readouterr().err
 
@@ -112,3 +143,9 @@ def test_registered_command_hands_the_rest_of_the_line_to_the_service():
 
 def test_every_service_is_listed():
     assert list(serve.SERVICES) == ["router", "ingest", "detector", "projector", "tracker", "gateway", "recorder", "mqtt", "webhook"]
+
+
+def test_every_service_has_a_loader_for_its_main_module():
+    assert list(serve.LOADERS) == list(serve.SERVICES)
+    for name in serve.SERVICES:
+        assert serve.load_service(name).__name__ == f"bevflow_services.{name}.main"

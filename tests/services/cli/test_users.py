@@ -9,7 +9,8 @@ from pathlib import Path
 import pytest
 from argon2 import PasswordHasher
 
-from bevflow_services.cli import UserError, users
+from bevflow_services.cli import users
+from bevflow_services.runtime import UserError
 from bevflow_services.storage.access import AccessStore
 
 

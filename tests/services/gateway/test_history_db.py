@@ -14,12 +14,12 @@ from bevflow.capture_time import CaptureWindow
 from bevflow.schemas import TrackState, Tracks
 from bevflow.site import parse_site
 
-from bevflow_services.cli import UserError
 from bevflow_services.gateway import GatewayState, create_app
 from bevflow_services.gateway.history import EventQuery, InMemoryHistory
 from bevflow_services.gateway.history_db import DatabaseHistory, history_store
 from bevflow_services.gateway.main import add_arguments
 from bevflow_services.recorder.recorder import Recorder
+from bevflow_services.runtime import UserError
 from bevflow_services.storage import HistoryDatabase, RetentionPolicy
 from tests.services.gateway.feed import S, SITE_YAML, T0, FakeClock, occupancy, tracks, violation
 from tests.services.storage.databases import damaged_sqlite_history

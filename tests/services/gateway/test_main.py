@@ -13,10 +13,10 @@ from bevflow.site import Site
 
 from bevflow_services import bus
 from bevflow_services.gateway import GatewayState, create_app
-from bevflow_services.cli import UserError
 from bevflow_services.cli.serve import run_service
 from bevflow_services.gateway.main import bus_feed
 from bevflow_services.launcher import free_port
+from bevflow_services.runtime import UserError
 from tests.services.gateway.feed import S, SITE_YAML, T0, FakeClock, occupancy, tracks, violation
 
 TIMEOUT_S = 10.0

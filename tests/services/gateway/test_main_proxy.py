@@ -14,9 +14,9 @@ from pathlib import Path
 
 import pytest
 
-from bevflow_services.cli import UserError
 from bevflow_services.gateway.main import proxy_options
 from bevflow_services.launcher import free_port
+from bevflow_services.runtime import UserError
 from tests.services.gateway.feed import SITE_YAML
 
 FORGED = "203.0.113.9"

@@ -13,10 +13,10 @@ from bevflow.sim.render_feed import detector_frame_size
 from bevflow.site import parse_site
 
 from bevflow_services import bus
-from bevflow_services.cli import UserError
 from bevflow_services.cli.serve import service_parser
 from bevflow_services.ingest import main as ingest
 from bevflow_services.launcher import free_port
+from bevflow_services.runtime import UserError
 
 SITE = parse_site("""
 site: ingest-test

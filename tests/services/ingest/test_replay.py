@@ -11,10 +11,10 @@ import pytest
 from bevflow.schemas import Detections2D
 
 from bevflow_services import bus
-from bevflow_services.cli import UserError
 from bevflow_services.ingest import main as ingest
 from bevflow_services.ingest import replay
 from bevflow_services.launcher import free_port
+from bevflow_services.runtime import UserError
 from tests.services.ingest.test_main import SITE, args_for
 
 ROWS = {  # frames 1..3; camera b sees nothing in frame 2, and one weak box in frame 3

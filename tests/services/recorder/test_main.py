@@ -12,10 +12,10 @@ import pytest
 
 from bevflow.capture_time import CaptureWindow
 
-from bevflow_services.cli import UserError
 from bevflow_services.launcher import free_port
 from bevflow_services.cli.serve import run_service
 from bevflow_services.recorder.main import run
+from bevflow_services.runtime import UserError
 from bevflow_services.storage import RetentionPolicy, RetentionResult, StorageUnavailable
 from tests.services.storage.databases import damaged_sqlite_history
 

@@ -13,9 +13,9 @@ import pytest
 
 from bevflow import schemas
 from bevflow_services import bus
-from bevflow_services.cli import UserError
 from bevflow_services.cli.serve import run_service
 from bevflow_services.launcher import free_port
+from bevflow_services.runtime import UserError
 
 TIMEOUT = 10.0
 

@@ -23,7 +23,7 @@ from bevflow.live.site_tracker import SiteTracker
 from bevflow.schemas import CameraCylinders, decode_event
 from bevflow.site import Site
 
-from bevflow_services.cli import UserError
+from bevflow_services.runtime import UserError
 from bevflow_services.tracker.main import add_arguments, drift_config
 from bevflow_services.tracker.ticks import TickHandler
 from tests.bevflow.calibration.test_drift import CONFIG, FPS, IDS, YAWS, feet_estimates, site_cameras, turned

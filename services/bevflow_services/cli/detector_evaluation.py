@@ -1,0 +1,92 @@
+"""``bevflow evaluate --detector --images DIR --annotations FILE``: score the person detector on
+annotated frames (AP50, AP50_rotated, precision, recall, F1, ms per frame), optionally drawing
+what it found (``--draw DIR``).
+
+Frames without calibration (no ``camera_height_m`` / ``focal_px`` in the COCO file, no
+``--camera-height`` / ``--focal``, no ``--scale``) are fed at the scale their image circle
+suggests for a camera on a 3 m ceiling (``bevflow.detect.circle``); what was assumed is printed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+
+from bevflow.detect.tiles import RIM_TILES, RimTileDetector, load_rim_tiles
+
+from bevflow_services.runtime import UserError
+
+
+def add_detector_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of ``bevflow evaluate`` that score the person detector on annotated frames."""
+    group = parser.add_argument_group("detector evaluation (--detector --images DIR --annotations FILE)")
+    group.add_argument("--detector", action="store_true", help="run the real person detector on images instead of using annotated boxes")
+    group.add_argument("--model", type=Path, metavar="PATH",
+                       help="the ONNX detector (default: the shipped model), or 'rim-tiles': rim tiles turned upright "
+                       "through the shipped YOLOX-nano, for real frames of low ceilings")  # fmt: skip
+    group.add_argument("--annotations", type=Path, metavar="FILE", help="COCO JSON of the --images: bbox [x,y,w,h] or rotated [cx,cy,w,h,deg]")
+    group.add_argument("--threads", type=int, default=2, metavar="N", help="ONNX Runtime threads (default 2)")
+    group.add_argument("--camera-height", type=float, metavar="M", help="camera height for images without 'camera_height_m' (with --focal)")
+    group.add_argument("--focal", type=float, metavar="PX", help="focal length in px for images without 'focal_px' (with --camera-height)")
+    group.add_argument("--scale", type=float, metavar="F",
+                       help="resize factor for images without calibration (default: found from the image circle "
+                       "for a 190-degree lens 3 m above the floor, printed)")  # fmt: skip
+    group.add_argument("--draw", type=Path, metavar="DIR", help="write each frame with the truth (green) and the detections (yellow: right, red: wrong) drawn")
+
+
+def _check(args: argparse.Namespace) -> None:
+    if not args.detector:
+        raise UserError("--images is for scoring the person detector: add --detector (and --annotations FILE)")
+    if args.annotations is None:
+        raise UserError("--detector --images DIR needs --annotations FILE (COCO JSON)")
+    if not args.images.is_dir():
+        raise UserError(f"--images {args.images} is not a folder")
+    if (args.camera_height is None) != (args.focal is None):
+        raise UserError("give --camera-height and --focal together")
+    if args.scale is not None and not (math.isfinite(args.scale) and args.scale > 0):
+        raise UserError(f"--scale must be a number > 0, got {args.scale}")
+    if args.threads <= 0:
+        raise UserError(f"--threads must be positive, got {args.threads}")
+    if str(args.model) == RIM_TILES and args.scale is not None:
+        raise UserError("--model rim-tiles sizes its tiles from the focal length: give --camera-height and --focal, or neither, not --scale")
+
+
+def run_detector_evaluation(args: argparse.Namespace) -> int:
+    from bevflow.detect.coco import CocoError
+    from bevflow.detect.runtime import Detector, DetectorError
+    from bevflow.evaluation.detector import detect_frames, score_frames
+    from bevflow.evaluation.drawing import write_drawings
+
+    _check(args)
+    try:
+        # Score every detection: AP needs the whole precision-recall curve.
+        detector: Detector | RimTileDetector
+        if str(args.model) == RIM_TILES:
+            detector = load_rim_tiles(threads=args.threads, score_threshold=0.05)
+        else:
+            detector = Detector(args.model, threads=args.threads, score_threshold=0.05)
+        results, ms = detect_frames(detector, args.annotations, args.images, args.camera_height, args.focal, args.scale,
+                                    log=print)  # fmt: skip
+        scores = score_frames(results, ms)
+        drawn = write_drawings(results, args.draw, scores.threshold) if args.draw is not None else []
+    except (DetectorError, CocoError, FileNotFoundError) as exc:
+        raise UserError(str(exc)) from None
+    except OSError as exc:
+        raise UserError(f"cannot write the drawings: {exc}") from None
+    print(f"{scores.images} images, {scores.annotations} people, {scores.detections} detections, "
+          f"{scores.ms_per_frame:.1f} ms per frame")  # fmt: skip
+    print(f"AP50 {scores.AP50:.3f}  AP50_rotated {scores.AP50_rotated:.3f}  precision {scores.precision:.3f}  "
+          f"recall {scores.recall:.3f}  F1 {scores.F1:.3f}  (score >= {scores.threshold:.3f})")  # fmt: skip
+    if drawn:
+        print(f"drew {len(drawn)} frames into {args.draw}")
+    if str(args.model) != RIM_TILES and any(r.setup.assumed is not None for r in results):
+        print("note: the shipped model has only seen renders; on real frames of low ceilings --model rim-tiles "
+              "finds far more people, at many times the cost (docs/RESULTS.md, 'Real frames')")  # fmt: skip
+    if args.json is not None:
+        try:
+            args.json.write_text(json.dumps(scores.as_dict(), indent=2) + "\n")
+        except OSError as exc:
+            raise UserError(f"cannot write {args.json}: {exc.strerror or exc}") from None
+    return 0

@@ -1,0 +1,225 @@
+"""Find people in the cameras' frames and publish their 2D boxes, camera by camera.
+
+    bevflow serve detector --site site.yaml
+    bevflow serve detector --site site.yaml --cameras cam1,cam2 --threads 4
+
+Subscribes to the frames of the site's cameras (or of ``--cameras``), runs ONNX Runtime on each
+with the camera's model (``detector`` in the site file, or the model for its mounting height;
+see ``bevflow_services.detector.models``) at the paper's height-adaptive scale, and publishes a
+``Detections2D`` per frame with the frame's sequence number and capture time, in the pixels of
+the camera's calibrated image (a frame sent smaller than its calibration, e.g. already at the
+detector's scale, is mapped back). Only the window of the frame around the camera's reporting
+radius is searched (``bevflow.detect.window``; ``--whole-frame`` searches it all): the projector
+drops everyone outside it, and a demo-hall camera's window is 58 % of its frame.
+
+Latest frame wins: each camera keeps only its newest unprocessed frame; every pass takes each
+camera's newest frame and detects them in turn, so a detector slower than its cameras skips
+frames (counted) instead of falling behind;
+the skipped sequence numbers show as dropped frames in the gateway's camera health. Bad frames
+(garbage payloads, a size that does not fit the camera, undecodable JPEG) are logged, counted and
+skipped.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import threading
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from bevflow.detect.providers import check_providers
+from bevflow.camera import Camera
+from bevflow.detect.runtime import Detector, DetectorError
+from bevflow.detect.tiles import RimTileDetector
+from bevflow.detect.window import detection_window, scaled_window
+from bevflow.detections import Boxes
+from bevflow.schemas import Detections2D, FrameHeader
+from bevflow.site import Site
+
+from bevflow_services import bus
+from bevflow_services.detector.models import CameraModels
+from bevflow_services.runtime import UserError, service_site, stop_on_signals
+from bevflow_services.service_metrics import MetricsBook, reporting
+
+log = logging.getLogger(__name__)
+SERVICE = "detector"
+ASPECT_TOLERANCE = 0.02  # a frame whose width and height scale differently is not this camera's
+REPORT_EVERY_S = 30.0
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_argument_group("detector")
+    group.add_argument("--cameras", default="", help="comma-separated camera ids to serve (default: all)")
+    group.add_argument("--model", default=None, metavar="MODEL",
+                       help="ONNX file or shipped model name for cameras whose site entry names none "
+                       "(default: the shipped model for the camera's height)")
+    group.add_argument("--threads", type=int, default=2, help="ONNX Runtime threads per inference (default 2)")
+    group.add_argument("--score-threshold", type=float, default=0.4,
+                       help="lowest confidence of a reported person, 0 to 1 (default 0.4)")
+    group.add_argument("--providers", default=None, metavar="LIST",
+                       help="ONNX Runtime execution providers, most wanted first, e.g. cuda,cpu or openvino,cpu "
+                       "(default: the site file's detector_providers, else cpu); missing ones fall back with a warning")
+    group.add_argument("--whole-frame", action="store_true",
+                       help="run the detector on the whole frame, not only the part that shows the camera's "
+                       "monitored radius (slower; finds people the projector then drops)")
+
+
+class BadFrame(Exception):
+    """A frame that cannot be run through the detector; ``reason`` is a short counter label."""
+
+    def __init__(self, reason: str, detail: str) -> None:
+        super().__init__(f"{reason}: {detail}")
+        self.reason, self.detail = reason, detail
+
+
+class FrameDetector:
+    """The service's work, apart from the bus: one frame in, that camera's boxes out."""
+
+    def __init__(self, site: Site, detectors: dict[str, Detector | RimTileDetector], whole_frame: bool = False) -> None:
+        self.site = site
+        self.detectors = detectors
+        # Each camera's window around its reporting radius; the rest of the frame holds nobody
+        # the projector would keep (``bevflow.detect.window``).
+        radius = {c.id: c.reporting_radius_m for c in site.cameras}
+        self.windows = {c: None if whole_frame else detection_window(site.camera(c), radius[c]) for c in detectors}
+
+    def detect(self, header: FrameHeader, image: np.ndarray) -> Detections2D:
+        """Boxes of the people in ``image`` (as its ``header`` describes it), in the camera's
+        calibrated pixels; ``BadFrame`` for a frame that does not fit its camera."""
+        camera_id = header.camera
+        if camera_id not in self.detectors:
+            raise BadFrame("unknown_camera", f"camera {camera_id!r} is not served here")
+        bgr = _bgr(header, image)
+        camera = self.site.camera(camera_id)
+        width, height = camera.image_size
+        sx, sy = bgr.shape[1] / width, bgr.shape[0] / height
+        if abs(sx / sy - 1.0) > ASPECT_TOLERANCE:
+            raise BadFrame("frame_size", f"a {bgr.shape[1]}x{bgr.shape[0]} frame from {camera_id}, "
+                           f"whose calibration is {width}x{height}")
+        x0, y0, x1, y1 = scaled_window(self.windows[camera_id], sx, bgr.shape[1], bgr.shape[0])
+        detector = self.detectors[camera_id]
+        # A rotation-aware detector turns its tiles about the point people lie radially about.
+        radial = {"centre": _nadir_in_window(camera, sx, sy, x0, y0)} if hasattr(detector, "detect_rotated") else {}
+        boxes = detector.detect(bgr[y0:y1, x0:x1], float(camera.center[2]), float(camera.K[0, 0]) * sx, **radial)
+        # Window pixels → frame pixels → calibrated pixels (pixel centres: u = (u' + 0.5) / s − 0.5).
+        scale = np.array([sx, sy, sx, sy])
+        xyxy = (boxes.xyxy + [x0, y0, x0, y0] + 0.5) / scale - 0.5
+        return Detections2D.from_boxes(camera_id, header.seq, header.capture_ns, Boxes(xyxy=xyxy, confidence=boxes.confidence))
+
+
+def _nadir_in_window(camera: Camera, sx: float, sy: float, x0: int, y0: int) -> tuple[float, float]:
+    u, v = camera.nadir_pixel()
+    return ((u + 0.5) * sx - 0.5 - x0, (v + 0.5) * sy - 0.5 - y0)
+
+
+def _bgr(header: FrameHeader, image: np.ndarray) -> np.ndarray:
+    if header.encoding == "jpeg":
+        decoded = cv2.imdecode(np.asarray(image, dtype=np.uint8).reshape(-1), cv2.IMREAD_COLOR)
+        if decoded is None:
+            raise BadFrame("undecodable", f"frame {header.camera}/{header.seq} is not a readable JPEG")
+        if decoded.shape[:2] != (header.height, header.width):
+            raise BadFrame("frame_size", f"a {decoded.shape[1]}x{decoded.shape[0]} JPEG whose header says "
+                           f"{header.width}x{header.height}")
+        return decoded
+    if header.encoding == "gray8":
+        return cv2.cvtColor(np.ascontiguousarray(image), cv2.COLOR_GRAY2BGR)
+    return np.asarray(image)
+
+
+class _Inbox(bus.LatestSubscription[bus.Frame]):
+    """A camera's newest frame; wakes the worker when one arrives."""
+
+    def __init__(self, session, key: str, stats: bus.BusStats, wake: threading.Event) -> None:
+        self._wake = wake
+        super().__init__(session, key, bus.FRAMES, keep=1, stats=stats)
+
+    def _accept(self, sample) -> None:
+        super()._accept(sample)
+        self._wake.set()
+
+
+def main(args: argparse.Namespace) -> int:
+    site, site_id = service_site(args)
+    cameras = [c for c in args.cameras.split(",") if c] or site.camera_ids
+    unknown = sorted(set(cameras) - set(site.camera_ids))
+    if unknown:
+        raise UserError(f"--cameras: site {site.site!r} has no camera {', '.join(unknown)}")
+    if not 0.0 <= args.score_threshold <= 1.0:
+        raise UserError(f"--score-threshold must be between 0 and 1, got {args.score_threshold}")
+    site_path = Path(args.site)
+    site_dir = site_path.parent if site_path.is_file() else None
+    try:
+        providers = check_providers(args.providers.split(",")) if args.providers is not None else site.detector_providers
+        models = CameraModels(site, cameras, site_dir=site_dir, default=args.model, threads=args.threads,
+                              score_threshold=args.score_threshold, providers=providers)
+    except (DetectorError, ValueError) as exc:
+        raise UserError(f"--providers: {exc}" if "provider" in str(exc) else str(exc)) from None
+    worker = FrameDetector(site, models.detectors, whole_frame=args.whole_frame)
+    keys = bus.Keys(site_id)
+    stats = bus.BusStats()
+    session = bus.open_session(bus.config_from_args(args))
+    codec = bus.JsonCodec(Detections2D)
+    wake = threading.Event()
+    inboxes = {c: _Inbox(session, keys.frame(c), stats, wake) for c in cameras}
+    publications = {c: bus.Publication(session, keys.detections(c), codec) for c in cameras}
+    token = bus.announce(session, keys, SERVICE)
+    print(f"bevflow detector: site {site_id!r}, {len(cameras)} cameras, models {models.models()}, "
+          f"on {', '.join(models.providers())}", flush=True)
+    try:
+        book = MetricsBook()
+        with stop_on_signals() as stop, reporting(session, site_id, SERVICE, book):
+            serve(inboxes, publications, worker, stats, stop, wake, book)
+    finally:
+        token.undeclare()
+        for inbox in inboxes.values():
+            inbox.close()
+        for publication in publications.values():
+            publication.close()
+        session.close()
+    return 0
+
+
+def serve(inboxes: dict[str, _Inbox], publications: dict[str, bus.Publication[Detections2D]],
+          worker: FrameDetector, stats: bus.BusStats, stop: threading.Event, wake: threading.Event,
+          book: MetricsBook | None = None) -> None:
+    """Serve the cameras in turn, each its newest frame, until ``stop`` is set; ``book`` gets
+    each frame's capture-to-published time."""
+    book = book if book is not None else MetricsBook()
+    detected = 0
+    next_report = time.monotonic() + REPORT_EVERY_S
+    while not stop.is_set():
+        wake.wait(0.2)
+        wake.clear()  # before the pass: a frame arriving during it wakes the next one
+        # Take every camera's newest frame first, then detect: the frames of one pass come from
+        # about the same moment, so the tracker gets the cameras of one instant together.
+        pending = [(camera, inbox.key, inbox.take(timeout=0)) for camera, inbox in inboxes.items()]
+        results: list[Detections2D] = []
+        for camera, key, frame in pending:
+            if frame is None:
+                continue
+            if frame.header.camera != camera:
+                stats.reject(key, "wrong_camera", f"a frame of {frame.header.camera!r} on {camera}'s key")
+                continue
+            try:
+                message = worker.detect(frame.header, frame.image)
+            except BadFrame as exc:
+                stats.reject(key, exc.reason, exc.detail)
+                continue
+            except Exception:  # a bug on one frame must not stop the other cameras
+                stats.count("handler_errors")
+                log.exception("could not run the detector on %s/%d; skipping it", camera, frame.header.seq)
+                continue
+            results.append(message)
+        # Published together at the end of the pass: the tracker closes a tick as soon as every
+        # camera it waits for has reported, so cameras of one instant should arrive together.
+        for message in results:
+            publications[message.camera].put(message)
+            book.observe("detector_latency_seconds", max(0.0, (time.time_ns() - message.capture_ns) / 1e9))
+            detected += 1
+        if time.monotonic() >= next_report:
+            next_report += REPORT_EVERY_S
+            log.info("frames detected %d; bus %s", detected, stats.snapshot())

@@ -1,0 +1,40 @@
+"""What every service shares at run time, whichever command starts it: the site it runs for, the
+signals that stop it, and the error a user can fix."""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+from bevflow.site import Site, SiteError, load_site_or_builtin
+
+
+class UserError(Exception):
+    """Something the user can fix (a bad path, file or option). Printed as one line, no traceback."""
+
+
+@contextmanager
+def stop_on_signals() -> Iterator[threading.Event]:
+    """An event set by SIGINT or SIGTERM while the block runs; the previous handlers come back
+    after it. Wait on it with a timeout so the handler gets to run promptly on the main thread."""
+    stop = threading.Event()
+    previous = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield stop
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+def service_site(args: argparse.Namespace) -> tuple[Site, str]:
+    """The site a service runs for (``--site``: a file or a built-in name) and its bus name
+    (``--site-id``, by default the ``site`` field of the file), the same way for every service."""
+    try:
+        site = load_site_or_builtin(args.site)
+    except SiteError as exc:
+        raise UserError(str(exc)) from None
+    site_id = getattr(args, "site_id", None) or site.site
+    return site, site_id
