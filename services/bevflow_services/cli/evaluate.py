@@ -26,8 +26,6 @@ them instead of the noise model (``bevflow.evaluation.rendered``; slow: add ``--
 from __future__ import annotations
 
 import argparse
-import importlib
-import importlib.util
 import json
 import math
 from pathlib import Path
@@ -43,7 +41,6 @@ from bevflow_services.cli.train_detector import add_detector_arguments, run_dete
 from bevflow_services.runtime import UserError
 
 DATASETS = ("wildtrack",)
-SUITE_MODULE = "bevflow.evaluation.suite"
 
 EPILOG = """\
 examples:
@@ -184,10 +181,7 @@ def _run_dataset(args: argparse.Namespace, noise: DetectorNoise, methods: list[s
 def _run_suite(args: argparse.Namespace, methods: list[str]) -> int:
     """Hand over to the simulated suites (``bevflow.evaluation.suite``), which track as well.
     A suite runs every projection method whatever ``methods`` says (its Table 3 compares them)."""
-    if importlib.util.find_spec(SUITE_MODULE) is None:
-        raise UserError(f"--suite is not available yet (no {SUITE_MODULE} module); use --dataset")
-    suite = importlib.import_module(SUITE_MODULE)
-    tables = importlib.import_module("bevflow.evaluation.tables")
+    from bevflow.evaluation import suite, tables  # here: the other commands start without them
     if args.root is not None or args.frames != ":" or args.fusion_distance != 0.45 or args.clip_to_image:
         raise UserError("--root, --frames, --fusion-distance and --clip-to-image apply to --dataset only")
     scale = 1.0 if args.frames_scale is None else args.frames_scale

@@ -1,14 +1,12 @@
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
 import pytest
 
 from bevflow_services.cli import main
-from bevflow_services.cli import evaluate
-from bevflow_services.cli.evaluate import SUITE_MODULE, parse_frame_slice
+from bevflow_services.cli.evaluate import parse_frame_slice
 from bevflow_services.runtime import UserError
 from tests.bevflow.datasets.test_wildtrack import write_fake_wildtrack
 
@@ -81,13 +79,6 @@ def test_dataset_and_suite_are_exclusive(root: Path) -> None:
     assert exit_.value.code == 2
 
 
-def test_suite_without_its_module_says_not_available(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture) -> None:
-    monkeypatch.setattr(evaluate, "SUITE_MODULE", "bevflow.evaluation.no_such_suite")
-    assert main(["evaluate", "--suite", "paper"]) == 2
-    assert "not available yet" in capsys.readouterr().err
-
-
-@pytest.mark.skipif(importlib.util.find_spec(SUITE_MODULE) is None, reason="no suite module yet")
 @pytest.mark.parametrize(
     ("args", "message"),
     [(["--suite", "no-such-suite"], "unknown suite"), (["--suite", "paper", "--frames", "0:5"], "--dataset only")],
