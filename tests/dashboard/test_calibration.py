@@ -17,7 +17,7 @@ from bevflow.schemas import CalibrationDrift
 from bevflow.site import load_site
 
 from bevflow_services.gateway import GatewayState, create_app
-from bevflow_services.gateway.routes.calibration import site_file_of
+from bevflow_services.gateway.site_file import site_file_of
 from tests.dashboard.cdp import Chromium, Page
 from tests.dashboard.conftest import DASHBOARD_DIR
 from tests.dashboard.server import serve

@@ -23,7 +23,7 @@ from bevflow.units import NS_PER_S
 
 from bevflow_services.gateway.history import EventQuery, HistoryStore, OccupancySample
 from bevflow_services.gateway.params import to_ns
-from bevflow_services.gateway.routes.occupancy import downsample, site_crowded_level
+from bevflow_services.gateway.occupancy import downsample, site_crowded_level
 
 HOUR_NS = 3600 * NS_PER_S
 PAGE = 1000

@@ -55,7 +55,8 @@ from bevflow_services.bus import (
 from bevflow_services.gateway.app import create_app
 from bevflow_services.gateway.auth import Access, check_auth_mode
 from bevflow_services.gateway.history_db import history_store
-from bevflow_services.gateway.routes.calibration import CalibrationInputs, site_file_of
+from bevflow_services.gateway.calibration_inputs import CalibrationInputs
+from bevflow_services.gateway.site_file import site_file_of
 from bevflow_services.gateway.state import GatewayState
 from bevflow_services.runtime import UserError, service_site
 

@@ -30,7 +30,7 @@ from prometheus_client.registry import Collector, CollectorRegistry
 
 from bevflow.schemas import EVENT_TYPES, AlertMessage, HistogramSeries, MetricSeries, ServiceMetrics
 
-from bevflow_services.gateway.routes.health import Status, site_health
+from bevflow_services.gateway.site_health import Status, site_health
 from bevflow_services.gateway.state import GatewayState
 from bevflow_services.service_metrics import REPORT_EVERY_S, SERIES, Histogram
 

@@ -25,7 +25,7 @@ import viser.transforms as vtf
 from bevflow.schemas import Tracks
 from bevflow.site import Site
 
-from bevflow_services.gateway.routes.occupancy import level_of
+from bevflow_services.gateway.occupancy import level_of
 from bevflow_services.gateway.state import GatewayState
 
 log = logging.getLogger(__name__)

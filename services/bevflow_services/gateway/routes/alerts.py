@@ -16,6 +16,8 @@ from starlette.requests import HTTPConnection
 
 from bevflow.schemas import EVENT_TYPES, FEED_EVENT_TYPES, AlertMessage
 
+from bevflow_services.gateway.acknowledgements import AcknowledgementView, acknowledgements_of
+from bevflow_services.gateway.event_query import event_query
 from bevflow_services.gateway.history import EventQuery
 from bevflow_services.gateway.params import (
     Limit,
@@ -25,10 +27,8 @@ from bevflow_services.gateway.params import (
     StateDep,
     TimeRangeDep,
     ZoneParam,
-    check_zone,
     split_csv,
 )
-from bevflow_services.gateway.routes.acknowledge import AcknowledgementView, acknowledgements_of
 
 router = APIRouter(prefix="/api", tags=["alerts"])
 
@@ -37,13 +37,6 @@ ActiveParam = Annotated[bool | None, Query(description="true: only ongoing alert
 TypesParam = Annotated[str | None, Query(
     description=f"comma-separated alert types: {', '.join(EVENT_TYPES)}; default: all but distance_violation "
     "(the per-pair events grouped into distance_incident)")]
-
-
-def event_query(site, window, types: frozenset[str] | None, zone: str | None, track: int | None,
-                active: bool | None) -> EventQuery:
-    """The alert filters every alert listing shares, checked against the site."""
-    return EventQuery(types=types, zone=check_zone(site, zone), track=track, active=active,
-                      since_ns=window.since_ns, until_ns=window.until_ns)
 
 
 class AlertItem(AlertMessage):

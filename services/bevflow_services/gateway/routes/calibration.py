@@ -13,9 +13,9 @@
 
 The router is self-contained. What it reads from ``app.state``, all optional:
 
-- ``site_file``: the ``Path`` of the site file (``site_file_of(args.site)``); without it the site
+- ``site_file``: the ``Path`` of the site file (``site_file.site_file_of(args.site)``); without it the site
   is a built-in one or unknown, and saving answers 409;
-- ``calibration_inputs``: a ``CalibrationInputs`` that the bus feeds with the projectors'
+- ``calibration_inputs``: a ``calibration_inputs.CalibrationInputs`` that the bus feeds with the projectors'
   cylinders (``put_cylinders``) and frames (``put_frame``, or on demand through its
   ``fetch_frame``); without one the router makes an empty one, and the page shows rendered frames
   and no consistency.
@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import threading
 from collections import OrderedDict
-from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated, Literal
 
@@ -46,12 +45,12 @@ from bevflow.calibration.extrinsics import (
 )
 from bevflow.calibration.floor_grid import BACKGROUND, floor_extent, render_floor_grid
 from bevflow.camera import Camera
-from bevflow.detections import Cylinders
 from bevflow.planning import PlanError, usable_radius
-from bevflow.schemas import CalibrationDrift, CameraCylinders, FrameHeader, iso_utc
+from bevflow.schemas import CalibrationDrift, FrameHeader, iso_utc
 from bevflow.site import Site, SiteError, load_site
 from bevflow.site_edit import update_camera_file
 
+from bevflow_services.gateway.calibration_inputs import CalibrationInputs
 from bevflow_services.gateway.state import GatewayState
 
 router = APIRouter(prefix="/api/calibration", tags=["calibration"])
@@ -59,57 +58,6 @@ router = APIRouter(prefix="/api/calibration", tags=["calibration"])
 MAX_RMS_PX = 3.0  # the same limits as `bevflow calibrate extrinsics`
 MAX_GROUND_ERROR_M = 0.15
 JPEG_QUALITY = 85
-
-
-# --- what the bus feeds -----------------------------------------------------------------------------
-FrameFetcher = Callable[[str], "tuple[FrameHeader, np.ndarray] | None"]
-
-
-class CalibrationInputs:
-    """The latest frame of each camera and the projectors' recent cylinders, grouped into ticks of
-    ``period_ns`` by capture time (the last ``max_ticks`` kept). Thread-safe: the bus feeds it
-    from its own threads.
-
-    Frames are large, and a still is wanted only while someone calibrates: rather than receiving
-    every frame, the gateway can pass ``fetch_frame(camera)``, which waits briefly for that
-    camera's next frame (None if none comes); a frame fetched or put is kept as the latest."""
-
-    def __init__(self, period_ns: int = 100_000_000, max_ticks: int = 1200, fetch_frame: FrameFetcher | None = None) -> None:
-        self.period_ns = period_ns
-        self.max_ticks = max_ticks
-        self.fetch_frame = fetch_frame
-        self._lock = threading.Lock()
-        self._frames: dict[str, tuple[FrameHeader, np.ndarray]] = {}
-        self._ticks: OrderedDict[int, dict[str, Cylinders]] = OrderedDict()
-
-    def put_frame(self, header: FrameHeader, image: np.ndarray) -> None:
-        """Keep ``image`` (bgr8 HxWx3, gray8 HxW, or the 1-D bytes of a JPEG) as the camera's latest."""
-        with self._lock:
-            self._frames[header.camera] = (header, image)
-
-    def latest_frame(self, camera: str, fetch: bool = True) -> tuple[FrameHeader, np.ndarray] | None:
-        """The camera's newest frame: fetched now when there is a ``fetch_frame`` and ``fetch``,
-        otherwise (or when none comes) the last one put or fetched."""
-        if fetch and self.fetch_frame is not None:
-            fetched = self.fetch_frame(camera)
-            if fetched is not None:
-                self.put_frame(*fetched)
-        with self._lock:
-            return self._frames.get(camera)
-
-    def put_cylinders(self, message: CameraCylinders) -> None:
-        slot = message.capture_ns - message.capture_ns % self.period_ns
-        # Kept as arrays, not messages: two minutes of a large site's cylinders as pydantic
-        # objects take hundreds of MiB. The camera index is set when a check reads them.
-        cylinders = message.to_cylinders(camera_index=-1)
-        with self._lock:
-            self._ticks.setdefault(slot, {})[message.camera] = cylinders
-            while len(self._ticks) > self.max_ticks:
-                self._ticks.popitem(last=False)
-
-    def ticks(self) -> list[dict[str, Cylinders]]:
-        with self._lock:
-            return [dict(t) for t in self._ticks.values()]
 
 
 _INPUTS_LOCK = threading.Lock()
@@ -137,13 +85,6 @@ def get_current_site(conn: HTTPConnection) -> Site:
         return load_site(path)
     except SiteError as exc:
         raise HTTPException(409, f"the site file cannot be read now: {exc}") from None
-
-
-def site_file_of(value: str | Path) -> Path | None:
-    """The path to give the gateway (``app.state.site_file``) for its ``--site`` value: the file,
-    or None for a built-in site name, which cannot be saved."""
-    path = Path(value)
-    return path.resolve() if path.is_file() else None
 
 
 InputsDep = Annotated[CalibrationInputs, Depends(get_inputs)]

@@ -23,6 +23,7 @@ from bevflow.schemas import EVENT_TYPES, Event, iso_utc
 from bevflow.units import NS_PER_S
 
 from bevflow_services.gateway.auth import AccessDep, Operator
+from bevflow_services.gateway.event_query import event_query
 from bevflow_services.gateway.history import HistoryStore, OccupancySample
 from bevflow_services.gateway.params import (
     Offset,
@@ -35,9 +36,8 @@ from bevflow_services.gateway.params import (
     check_zone,
     split_csv,
 )
-from bevflow_services.gateway.routes.alerts import event_query
-from bevflow_services.gateway.routes.occupancy import downsample
-from bevflow_services.gateway.routes.users import record_trace
+from bevflow_services.gateway.occupancy import downsample
+from bevflow_services.gateway.trace_audit import record_trace
 
 router = APIRouter(prefix="/api/history", tags=["history"])
 

@@ -19,7 +19,7 @@ from bevflow.units import NS_PER_S
 
 from bevflow_services.gateway.history import OccupancySample
 from bevflow_services.gateway.params import LastS, SiteDep, StateDep, TimeRangeDep, ZoneParam, check_zone, recent
-from bevflow_services.gateway.routes.occupancy import site_crowded_level
+from bevflow_services.gateway.occupancy import site_crowded_level
 
 router = APIRouter(prefix="/api", tags=["occupancy"])
 

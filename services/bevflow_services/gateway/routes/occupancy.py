@@ -2,17 +2,14 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated
 
-import numpy as np
 from fastapi import APIRouter, Query
 from pydantic import BaseModel, Field
 
 from bevflow.schemas import iso_utc
-from bevflow.site import Site
-from bevflow.units import NS_PER_S
 
-from bevflow_services.gateway.history import OccupancySample
+from bevflow_services.gateway.occupancy import Level, OccupancyHistory, downsample, level_of
 from bevflow_services.gateway.params import (
     LastS,
     SiteDep,
@@ -24,7 +21,6 @@ from bevflow_services.gateway.params import (
 )
 
 router = APIRouter(prefix="/api/occupancy", tags=["occupancy"])
-Level = Literal["unknown", "normal", "crowded", "over_capacity"]
 
 
 class ZoneNow(BaseModel):
@@ -47,31 +43,6 @@ class OccupancyNow(BaseModel):
     crowded_level: int | None = Field(default=None, description="count from which the whole site is crowded")
     level: Level
     zones: list[ZoneNow]
-
-
-class OccupancyHistory(BaseModel):
-    """Occupancy over time, column by column: ``total[i]`` and ``zones[z][i]`` are the highest
-    counts in the ``step_s`` seconds starting at ``time_ns[i]``."""
-
-    step_s: int
-    time_ns: list[int]
-    total: list[int]
-    zones: dict[str, list[int]]
-
-
-def level_of(count: int, crowded_level: int | None, capacity: int | None) -> Level:
-    if capacity is not None and count > capacity:
-        return "over_capacity"
-    if crowded_level is not None and count >= crowded_level:
-        return "crowded"
-    if capacity is None and crowded_level is None:
-        return "unknown"
-    return "normal"
-
-
-def site_crowded_level(site: Site) -> int | None:
-    """The site's crowded level (``Site.crowded_level``)."""
-    return site.crowded_level
 
 
 @router.get("", response_model=OccupancyNow, summary="Occupancy now, site and per zone")
@@ -129,21 +100,3 @@ def occupancy_history(
             zones={z: counts[cut:] for z, counts in history.zones.items()},
         )
     return history
-
-
-def downsample(samples: list[OccupancySample], zone_ids: list[str], step_s: int) -> OccupancyHistory:
-    """Group one-second samples into ``step_s`` steps, keeping each step's maximum."""
-    if not samples:
-        return OccupancyHistory(step_s=step_s, time_ns=[], total=[], zones={z: [] for z in zone_ids})
-    seconds = np.array([s.time_ns // NS_PER_S for s in samples], dtype=np.int64)
-    steps, first = np.unique(seconds // step_s, return_index=True)
-
-    def column(values: list[int]) -> list[int]:
-        return np.maximum.reduceat(np.asarray(values, dtype=np.int64), first).tolist()
-
-    return OccupancyHistory(
-        step_s=step_s,
-        time_ns=(steps * step_s * NS_PER_S).tolist(),
-        total=column([s.total for s in samples]),
-        zones={z: column([s.zones.get(z, 0) for s in samples]) for z in zone_ids},
-    )

@@ -12,7 +12,7 @@ from fastapi import APIRouter, Response
 from pydantic import BaseModel
 
 from bevflow_services.gateway.params import StateDep
-from bevflow_services.gateway.routes.health import NOT_OK, STALE_AFTER_S
+from bevflow_services.gateway.site_health import NOT_OK, STALE_AFTER_S
 
 router = APIRouter(tags=["health"])
 

@@ -9,7 +9,7 @@ from bevflow.schemas import EVENT_TYPES, SCHEMA_VERSION
 from bevflow.site import Site
 
 from bevflow_services.gateway.params import SiteDep
-from bevflow_services.gateway.routes.view3d import PATH as VIEW3D_PATH
+from bevflow_services.gateway.view3d_path import PATH as VIEW3D_PATH
 from bevflow_services.redact import redact
 
 router = APIRouter(prefix="/api", tags=["site"])

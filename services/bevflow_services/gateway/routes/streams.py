@@ -27,25 +27,20 @@ import asyncio
 from collections.abc import Awaitable, Callable
 from typing import Any
 
-from fastapi import APIRouter, HTTPException, WebSocket, WebSocketDisconnect
-from fastapi.responses import JSONResponse
-from pydantic import BaseModel
+from fastapi import APIRouter, HTTPException, WebSocket
 
 from bevflow.schemas import EVENT_TYPES, FEED_EVENT_TYPES, AlertMessage, Tracks
 
+from bevflow_services.gateway.acknowledgements import acknowledgements_stream as send_acknowledgements
 from bevflow_services.gateway.alert_replay import ReplayError, missed_alerts, position
-from bevflow_services.gateway.auth import get_access
-from bevflow_services.gateway.fanout import Subscription, pump
 from bevflow_services.gateway.params import split_csv
-from bevflow_services.gateway.routes.users import audited_stream
 from bevflow_services.gateway.state import GatewayState
+from bevflow_services.gateway.trace_audit import audited_stream
+from bevflow_services.gateway.ws.access import authorized, refuse
+from bevflow_services.gateway.ws.forwarding import json_sender, serve
 
 router = APIRouter()
 REPLAY_CHOICES = ("none", "active")
-# What sending to a client that has just gone away raises, depending on the server.
-CLIENT_GONE = (WebSocketDisconnect, OSError, RuntimeError)
-# How often an open stream's credential is checked again: revoking it ends the stream within this.
-RECHECK_S = 0.5
 
 
 class AlertFilter:
@@ -85,73 +80,6 @@ async def replay_since(websocket: WebSocket, state: GatewayState, wanted: AlertF
         raise HTTPException(400, str(exc)) from None
 
 
-async def refuse(websocket: WebSocket, exc: HTTPException) -> None:
-    if "websocket.http.response" in websocket.scope.get("extensions", {}):
-        await websocket.send_denial_response(JSONResponse({"detail": exc.detail}, status_code=exc.status_code))
-    else:
-        await websocket.close(code=1008, reason=str(exc.detail)[:120])
-
-
-async def authorized(websocket: WebSocket, role: str = "viewer") -> bool:
-    """Whether the client may have this stream; if not, refuses it (401 or 403) and says False."""
-    principal = get_access(websocket).principal(websocket)
-    if principal is None:
-        await refuse(websocket, HTTPException(401, "log in, or pass an API token (?token=TOKEN)"))
-        return False
-    if not principal.can(role):
-        await refuse(websocket, HTTPException(403, f"this stream needs the {role} role; {principal.name} is a {principal.role}"))
-        return False
-    if principal.via == "session" and not same_origin(websocket):
-        # Another site's page opening a socket with the user's cookie (browsers that ignore SameSite).
-        await refuse(websocket, HTTPException(403, "a session cookie is accepted only from the gateway's own pages"))
-        return False
-    return True
-
-
-def same_origin(websocket: WebSocket) -> bool:
-    """Whether the handshake's Origin (if the client sent one) is the host it connected to."""
-    origin = websocket.headers.get("origin")
-    if origin is None:
-        return True  # not a browser
-    return origin.split("://", 1)[-1].rstrip("/") == websocket.headers.get("host", "")
-
-
-async def until_revoked(websocket: WebSocket, role: str = "viewer") -> None:
-    """Return once the client's credential no longer grants ``role`` (its token revoked, its user
-    removed or demoted, its password changed, its session ended or expired), closing the socket
-    with 1008. The check was made once at the handshake; repeating it is what ends a stream that
-    was opened before access was taken away, whichever process took it (the gateway or
-    ``bevflow users`` on the database)."""
-    access = get_access(websocket)
-    while True:
-        await asyncio.sleep(RECHECK_S)
-        principal = await asyncio.to_thread(access.principal, websocket)  # a database query
-        if principal is None or not principal.can(role):
-            await websocket.close(code=1008, reason="access revoked or expired")
-            return
-
-
-async def serve(websocket: WebSocket, sub: Subscription[Any], send: Callable[[Any], Awaitable[None]]) -> None:
-    """Forward ``sub`` to the client until it disconnects or loses access; its reads are only
-    watched for closing."""
-
-    async def until_closed() -> None:
-        while (await websocket.receive())["type"] != "websocket.disconnect":
-            pass
-
-    tasks = [asyncio.create_task(pump(sub, send)), asyncio.create_task(until_closed()),
-             asyncio.create_task(until_revoked(websocket))]
-    try:
-        await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
-    finally:
-        for task in tasks:
-            task.cancel()
-        outcomes = await asyncio.gather(*tasks, return_exceptions=True)
-    for outcome in outcomes:
-        if isinstance(outcome, Exception) and not isinstance(outcome, CLIENT_GONE):
-            raise outcome
-
-
 def skip_replayed(send: Callable[[AlertMessage], Awaitable[None]],
                   replayed: list[AlertMessage]) -> Callable[[AlertMessage], Awaitable[None]]:
     """``send``, less the live alerts the replay already sent in the same or a newer state."""
@@ -162,13 +90,6 @@ def skip_replayed(send: Callable[[AlertMessage], Awaitable[None]],
             await send(alert)
 
     return send_new
-
-
-def json_sender(websocket: WebSocket) -> Callable[[BaseModel], Awaitable[None]]:
-    async def send(message: BaseModel) -> None:
-        await websocket.send_text(message.model_dump_json())
-
-    return send
 
 
 @router.websocket("/ws/alerts")
@@ -236,12 +157,10 @@ async def tracks_stream(websocket: WebSocket) -> None:
 @router.websocket("/ws/acknowledgements")
 async def acknowledgements_stream(websocket: WebSocket) -> None:
     """Alert acknowledgements as operators make them (``AcknowledgementView`` JSON per frame)."""
-    from bevflow_services.gateway.routes.acknowledge import acknowledgements_stream as stream
-
     if not await authorized(websocket):
         return
     unknown = sorted(set(websocket.query_params.keys()) - {"token"})
     if unknown:
         await refuse(websocket, HTTPException(400, f"unknown parameter(s) {', '.join(unknown)}; takes only token"))
         return
-    await stream(websocket)
+    await send_acknowledgements(websocket)

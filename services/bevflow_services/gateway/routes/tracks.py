@@ -22,7 +22,7 @@ from bevflow_services.gateway.params import (
     check_zone,
     recent,
 )
-from bevflow_services.gateway.routes.users import record_trace
+from bevflow_services.gateway.trace_audit import record_trace
 from bevflow_services.gateway.state import GatewayState
 
 router = APIRouter(prefix="/api/tracks", tags=["tracks"])

@@ -2,26 +2,22 @@
 
 Users are added, removed, given a new password or role; their API tokens made, listed and
 revoked. A new password ends the user's sessions and API tokens; whatever ends a credential also
-closes the websockets it opened (``streams.until_revoked``).
+closes the websockets it opened (``ws.access.until_revoked``).
 
 ``bevflow users`` does the same from the command line, on the database directly.
 """
 
 from __future__ import annotations
 
-import time
-from collections.abc import AsyncIterator
-from contextlib import asynccontextmanager
 from datetime import datetime
 from typing import Annotated
 
-from fastapi import APIRouter, HTTPException, Path, Query, Request
-from starlette.requests import HTTPConnection
+from fastapi import APIRouter, HTTPException, Path, Query
 from pydantic import BaseModel, Field
 
 from bevflow.schemas import iso_utc
 
-from bevflow_services.gateway.auth import AccessDep, Admin, client_address, get_access, new_api_token
+from bevflow_services.gateway.auth import AccessDep, Admin, new_api_token
 from bevflow_services.gateway.params import Limit, Offset, Page, to_ns
 from bevflow_services.gateway.password_policy import PasswordError
 from bevflow_services.storage.access import ROLES
@@ -169,26 +165,3 @@ def audit_log(
     items = [AuditView(time=iso_utc(e.time_ns), time_ns=e.time_ns, user=e.user, action=e.action, track_id=e.track_id,
                        client=e.client, detail=e.detail) for e in entries]
     return Page[AuditView](items=items, total=total, limit=limit, offset=offset)
-
-
-def record_trace(request: Request, access: AccessDep, action: str, track_id: int | None, detail: str = "") -> None:
-    """Write the audit row for a look at personal data (a path, contacts, track summaries)."""
-    principal = getattr(request.state, "principal", None)
-    who = principal.name if principal is not None else "unknown"
-    access.store.audit(access.clock(), who, action, track_id, client_address(request), detail)
-
-
-@asynccontextmanager
-async def audited_stream(conn: HTTPConnection, action: str) -> AsyncIterator[None]:
-    """Audit rows for a live stream that shows where everyone is (``live_tracks``): one when it
-    opens and one when it closes, with how long it ran. Watching it long enough rebuilds paths,
-    which is tracing, so it is recorded like the routes that trace a person."""
-    access = get_access(conn)
-    principal = access.principal(conn)
-    who, client = (principal.name if principal is not None else "unknown"), client_address(conn)
-    access.store.audit(access.clock(), who, action, None, client, "opened")
-    started = time.monotonic()
-    try:
-        yield
-    finally:  # written at once, even when the stream's task is being cancelled
-        access.store.audit(access.clock(), who, action, None, client, f"closed after {time.monotonic() - started:.0f} s")

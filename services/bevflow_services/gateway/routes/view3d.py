@@ -21,10 +21,11 @@ from fastapi.responses import RedirectResponse, Response
 from websockets.asyncio.client import ClientConnection
 
 from bevflow_services.gateway.auth import Viewer
-from bevflow_services.gateway.routes.streams import CLIENT_GONE, authorized, refuse, until_revoked
-from bevflow_services.gateway.routes.users import audited_stream
+from bevflow_services.gateway.trace_audit import audited_stream
+from bevflow_services.gateway.view3d_path import PATH
+from bevflow_services.gateway.ws.access import authorized, refuse, until_revoked
+from bevflow_services.gateway.ws.forwarding import CLIENT_GONE
 
-PATH = "/view3d"
 LOOPBACK = "127.0.0.1"
 FETCH_TIMEOUT_S = 10.0
 router = APIRouter(include_in_schema=False)

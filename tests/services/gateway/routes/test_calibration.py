@@ -17,7 +17,8 @@ from bevflow.schemas import CalibrationDrift, CameraCylinders, FrameHeader
 from bevflow.site import load_site
 
 from bevflow_services.gateway import GatewayState, create_app
-from bevflow_services.gateway.routes.calibration import CalibrationInputs, site_file_of
+from bevflow_services.gateway.calibration_inputs import CalibrationInputs
+from bevflow_services.gateway.site_file import site_file_of
 from tests.services.gateway import calibration_site
 from tests.services.gateway.calibration_site import FLOOR_POINTS, SITE_YAML, TRUE_POSITION, true_camera, true_pixels
 
@@ -136,13 +137,6 @@ def test_a_builtin_site_cannot_be_saved(builtin_client: TestClient) -> None:
     assert builtin_client.post("/api/calibration/cameras/gate/solve", json=points_body()).status_code == 200
 
 
-def test_site_file_of(tmp_path: Path) -> None:
-    path = tmp_path / "s.yaml"
-    path.write_text(SITE_YAML)
-    assert site_file_of(path) == path.resolve()
-    assert site_file_of("demo-hall") is None
-
-
 def test_overview(client: TestClient, site_file: Path) -> None:
     body = client.get("/api/calibration").json()
     assert (body["site"], body["editable"], body["site_file"], body["reason"]) == ("calib-hall", True, str(site_file.resolve()), "")
@@ -239,13 +233,6 @@ def test_consistency_from_the_projectors_cylinders(client: TestClient) -> None:
     strict = client.get("/api/calibration/consistency?tolerance_m=0.1&min_samples=40").json()["pairs"][0]
     assert (strict["judged"], strict["agrees"]) == (False, None)
     assert client.get("/api/calibration/consistency?gate_m=0").status_code == 422
-
-
-def test_calibration_inputs_keep_only_the_latest_ticks() -> None:
-    inputs = CalibrationInputs(period_ns=100, max_ticks=3)
-    for k in range(5):
-        inputs.put_cylinders(CameraCylinders.from_cylinders("gate", k, 100 * k + 10, Cylinders(xy=[[float(k), 0.0]])))
-    assert [t["gate"].xy[0, 0] for t in inputs.ticks()] == [2.0, 3.0, 4.0]
 
 
 def test_drift_per_camera_follows_the_trackers_alerts(client: TestClient, state: GatewayState) -> None:

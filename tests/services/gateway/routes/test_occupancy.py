@@ -3,7 +3,6 @@ from __future__ import annotations
 import pytest
 from fastapi.testclient import TestClient
 
-from bevflow_services.gateway.routes.occupancy import level_of
 from bevflow_services.gateway.state import GatewayState
 from tests.services.gateway.feed import S, T0, occupancy
 
@@ -22,15 +21,6 @@ def test_occupancy_now_is_the_latest_tick(client: TestClient, state: GatewayStat
     assert body["time"] == "2023-11-14T22:13:21.000Z"
     zones = {z["id"]: (z["count"], z["capacity"], z["crowded_level"], z["level"]) for z in body["zones"]}
     assert zones == {"gate": (4, 3, 2, "over_capacity"), "shop": (5, 10, 5, "crowded")}
-
-
-@pytest.mark.parametrize(
-    ("count", "crowded", "capacity", "level"),
-    [(0, None, None, "unknown"), (3, 4, 5, "normal"), (4, 4, 5, "crowded"), (5, 4, 5, "crowded"), (6, 4, 5, "over_capacity"),
-     (9, None, 10, "normal"), (2, 2, None, "crowded")],
-)
-def test_level_of(count, crowded, capacity, level) -> None:
-    assert level_of(count, crowded, capacity) == level
 
 
 def _feed_minute(state: GatewayState) -> None:

@@ -1,0 +1,3 @@
+"""Where the gateway serves the 3D view: its page under ``PATH/`` and its websocket at ``PATH``."""
+
+PATH = "/view3d"

@@ -1,0 +1,1 @@
+"""What the gateway's websockets share: who may open them, and forwarding a subscription to a client."""
