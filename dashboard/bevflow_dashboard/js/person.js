@@ -93,7 +93,8 @@ export class PersonPanel {
 
   renderContacts(contacts) {
     this.contactsLimit.textContent = `(closer than ${metres(contacts.limit_m)}, the short ones left out)`;
-    const link = (id) => el("button", { type: "button", class: "track-link", onclick: () => this.onTrack(id) }, `#${id}`);
+    const link = (id) =>
+      el("button", { type: "button", class: "track-link", "data-track": id, onclick: () => this.onTrack(id) }, `#${id}`);
     // One person the tracker lost and found again under new ids: every id, as one contact.
     const ids = (contact) => (contact.tracks?.length > 1 ? contact.tracks : [contact.track]);
     const rows = contacts.contacts.map((contact) =>

@@ -65,6 +65,13 @@ def play(folder: Path, *options: str, until: int, timeout_s: float = 10.0) -> tu
                 if len(got) >= until:
                     break
             time.sleep(0.02)
+        # The last frames may still be on their way over the bus when the replay's thread returns.
+        grace = time.monotonic() + 2.0
+        while time.monotonic() < grace:
+            with lock:
+                if len(got) >= until:
+                    break
+            time.sleep(0.02)
     finally:
         ended = not worker.is_alive()
         stop.set()
