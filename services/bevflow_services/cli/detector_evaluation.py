@@ -55,16 +55,18 @@ def _check(args: argparse.Namespace) -> None:
 
 def run_detector_evaluation(args: argparse.Namespace) -> int:
     from bevflow.detect.coco import CocoError
-    from bevflow.detect.runtime import Detector, DetectorError
+    from bevflow.detect.runtime import DEFAULT_RANGES, Detector, DetectorBank, DetectorError
     from bevflow.evaluation.detector import detect_frames, score_frames
     from bevflow.evaluation.drawing import write_drawings
 
     _check(args)
     try:
         # Score every detection: AP needs the whole precision-recall curve.
-        detector: Detector | RimTileDetector
+        detector: Detector | RimTileDetector | DetectorBank
         if str(args.model) == RIM_TILES:
             detector = load_rim_tiles(threads=args.threads, score_threshold=0.05)
+        elif args.model is None and args.scale is None:  # each frame gets the model of its (assumed) height
+            detector = DetectorBank(DEFAULT_RANGES, threads=args.threads, score_threshold=0.05)
         else:
             detector = Detector(args.model, threads=args.threads, score_threshold=0.05)
         results, ms = detect_frames(detector, args.annotations, args.images, args.camera_height, args.focal, args.scale,
@@ -81,9 +83,8 @@ def run_detector_evaluation(args: argparse.Namespace) -> int:
           f"recall {scores.recall:.3f}  F1 {scores.F1:.3f}  (score >= {scores.threshold:.3f})")  # fmt: skip
     if drawn:
         print(f"drew {len(drawn)} frames into {args.draw}")
-    if str(args.model) != RIM_TILES and any(r.setup.assumed is not None for r in results):
-        print("note: the shipped model has only seen renders; on real frames of low ceilings --model rim-tiles "
-              "finds far more people, at many times the cost (docs/RESULTS.md, 'Real frames')")  # fmt: skip
+    if isinstance(detector, DetectorBank):
+        print(f"models by camera height: {detector.describe()}")
     if args.json is not None:
         try:
             args.json.write_text(json.dumps(scores.as_dict(), indent=2) + "\n")

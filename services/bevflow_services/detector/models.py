@@ -33,7 +33,7 @@ from bevflow.detect.runtime import (
     DetectorOptions,
     HeightRange,
 )
-from bevflow.detect.tiles import RIM_TILES, TILE_MODEL, RimTileDetector
+from bevflow.detect.tiles import CENTRE_MODEL, RIM_TILES, TILE_MODEL, RimTileDetector
 from bevflow.site import Site
 
 SHIPPED_MODELS = DEFAULT_MODEL.parent
@@ -88,8 +88,8 @@ class CameraModels:
 
         def named(name: str | Path) -> Detector | RimTileDetector:
             if str(name) == RIM_TILES:
-                if not tiles:  # YOLOX-nano on the tiles, the shipped general model under the camera
-                    tiles.append(RimTileDetector(load(TILE_MODEL, threads, **options), centre=model(DEFAULT_MODEL)))
+                if not tiles:
+                    tiles.append(RimTileDetector(load(TILE_MODEL, threads, **options), centre=model(CENTRE_MODEL)))
                 return tiles[0]
             return model(name)
 

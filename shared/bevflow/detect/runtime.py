@@ -29,10 +29,13 @@ from numpy.typing import NDArray
 
 from bevflow.detect.decoders import FORMATS, decode_centernet, decode_fastestdet, decode_yolov5, decode_yolov8, decode_yolox, guess_format, nms
 from bevflow.detect.providers import DEFAULT_PROVIDERS, plan_providers
+from bevflow.detect.rotated import radial_boxes
 from bevflow.detect.scaling import scale_factor
+from bevflow.detect.tiles import RIM_TILES, RimTileDetector, load_rim_tiles
 from bevflow.detections import Boxes
 
 _log = logging.getLogger(__name__)
+FloatArray = NDArray[np.float64]
 DEFAULT_MODEL = Path(__file__).resolve().parent.parent / "data" / "models" / "bevflow-person-centernet.onnx"
 PAD_MULTIPLE = 32
 LETTERBOX_GREY = 114
@@ -140,7 +143,11 @@ class Detector:
     def detect_batch(self, images: Sequence[NDArray[np.uint8]], heights_m: Sequence[float], focals_px: Sequence[float]) -> list[Boxes]:
         """``detect`` for several frames; frames whose model inputs have the same size share one
         inference call (only for models with a dynamic batch axis)."""
-        prepared = [self.prepare(im, self.scale_for(h, f)) for im, h, f in zip(images, heights_m, focals_px, strict=True)]
+        return self.detect_batch_scaled(images, [self.scale_for(h, f) for h, f in zip(heights_m, focals_px, strict=True)])
+
+    def detect_batch_scaled(self, images: Sequence[NDArray[np.uint8]], scales: Sequence[float]) -> list[Boxes]:
+        """``detect_scaled`` for several images, batched as ``detect_batch`` does."""
+        prepared = [self.prepare(im, s) for im, s in zip(images, scales, strict=True)]
         out: list[Boxes | None] = [None] * len(prepared)
         groups: dict[tuple[int, ...], list[int]] = {}
         batched = not isinstance(self.session.get_inputs()[0].shape[0], int)
@@ -274,19 +281,42 @@ class DetectorBank:
                 raise ValueError(f"detector height range [{r.min_m}, {r.max_m}) is empty")
         self.ranges = ordered
         self.threads, self.options = threads, options
-        self._loaded: dict[int, Detector] = {}
+        self._loaded: dict[int, Detector | RimTileDetector] = {}
 
-    def for_height(self, camera_height_m: float) -> Detector:
+    def for_height(self, camera_height_m: float) -> Detector | RimTileDetector:
         for i, r in enumerate(self.ranges):
             if r.min_m <= camera_height_m < r.max_m:
                 if i not in self._loaded:
-                    self._loaded[i] = Detector(r.model, self.threads, **self.options)
+                    self._loaded[i] = self._load(r.model)
                 return self._loaded[i]
         spans = ", ".join(f"[{r.min_m}, {r.max_m})" for r in self.ranges)
         raise ValueError(f"no detector model covers a camera {camera_height_m} m high (ranges: {spans})")
 
     def detect(self, image_bgr: NDArray[np.uint8], camera_height_m: float, focal_px: float) -> Boxes:
         return self.for_height(camera_height_m).detect(image_bgr, camera_height_m, focal_px)
+
+    def detect_rotated(self, image_bgr: NDArray[np.uint8], camera_height_m: float, focal_px: float,
+                       centre: tuple[float, float]) -> tuple[FloatArray, FloatArray]:  # fmt: skip
+        """Rotated boxes (N, 5) and scores: the rim-tile detector's own angles, other models'
+        boxes turned to their radial angle about ``centre``."""
+        detector = self.for_height(camera_height_m)
+        if isinstance(detector, Detector):
+            boxes = detector.detect(image_bgr, camera_height_m, focal_px)
+            return radial_boxes(boxes.xyxy, centre), boxes.confidence
+        return detector.detect_rotated(image_bgr, camera_height_m, focal_px, centre)
+
+    def describe(self) -> str:
+        """E.g. "under 5 m: rim-tiles; from 5 m: bevflow-person-centernet"."""
+        parts = []
+        for r in self.ranges:
+            span = f"under {r.max_m:g} m" if r.min_m <= 0 else f"from {r.min_m:g} m" if r.max_m >= 100 else f"{r.min_m:g}-{r.max_m:g} m"
+            parts.append(f"{span}: {r.model if str(r.model) == RIM_TILES else Path(r.model or DEFAULT_MODEL).stem}")
+        return "; ".join(parts)
+
+    def _load(self, model: str | Path | None) -> Detector | RimTileDetector:
+        if str(model) == RIM_TILES:
+            return load_rim_tiles(self.threads, **self.options)
+        return Detector(model, self.threads, **self.options)
 
 
 # As in the paper, one model for low ceilings and one for the rest: the general model (renders
@@ -296,4 +326,5 @@ class DetectorBank:
 # two cores feel, and the general model meets the suite's targets there (see the model card);
 # a site file's ``detectors`` can ask for the 6 m split.
 LOW_CEILING_MODEL = DEFAULT_MODEL.with_name("bevflow-person-centernet-low.onnx")
-DEFAULT_RANGES = (HeightRange(0.0, 5.0, LOW_CEILING_MODEL), HeightRange(5.0, 100.0, None))
+RENDER_TRAINED_RANGES = (HeightRange(0.0, 5.0, LOW_CEILING_MODEL), HeightRange(5.0, 100.0, None))
+DEFAULT_RANGES = RENDER_TRAINED_RANGES

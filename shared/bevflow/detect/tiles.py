@@ -30,7 +30,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Unpack
 
 import cv2
 import numpy as np
@@ -42,10 +42,11 @@ from bevflow.detect.rotated import radial_boxes, rotated_iou_matrix
 from bevflow.detections import Boxes
 
 if TYPE_CHECKING:  # loaded only when a model loads, as in load_rim_tiles
-    from bevflow.detect.runtime import Detector
+    from bevflow.detect.runtime import Detector, DetectorOptions
 
 FloatArray = NDArray[np.float64]
 EDGE_PX = 2.0  # a box this close to a tile's side edge is cut by it
+CENTRE_MARGIN_SHARE = 0.25  # of the radius: how far a person kept by the centre model may reach out
 
 
 @dataclass(frozen=True)
@@ -90,29 +91,30 @@ class RimTileDetector:
         rotated, conf = self._tiles(image_bgr, centre, radius)
         if self.centre is not None:
             inner = np.hypot(rotated[:, 0] - centre[0], rotated[:, 1] - centre[1]) >= self.centre_share * radius
-            boxes = self.centre.detect(image_bgr, camera_height_m, focal_px)
-            mid = radial_boxes(boxes.xyxy, centre)
+            # Only the middle of the frame: a person kept there reaches at most a few tenths of
+            # the radius beyond ``centre_share``.
+            half = int(math.ceil((self.centre_share + CENTRE_MARGIN_SHARE) * radius))
+            x0, y0 = max(0, int(centre[0]) - half), max(0, int(centre[1]) - half)
+            crop = np.ascontiguousarray(image_bgr[y0 : int(centre[1]) + half + 1, x0 : int(centre[0]) + half + 1])
+            boxes = self.centre.detect(crop, camera_height_m, focal_px)
+            mid = radial_boxes(boxes.xyxy + [x0, y0, x0, y0], centre)
             near = np.hypot(mid[:, 0] - centre[0], mid[:, 1] - centre[1]) < self.centre_share * radius
             rotated, conf = np.concatenate([rotated[inner], mid[near]]), np.concatenate([conf[inner], boxes.confidence[near]])
         return rotated, conf
 
     def _tiles(self, image: NDArray[np.uint8], centre: tuple[float, float], radius: float) -> tuple[FloatArray, FloatArray]:
         lay, n = self.layout, self.input_px
-        side = lay.side_share * radius
-        k = n / side
+        k = n / (lay.side_share * radius)
         # Shrink the frame once (area-averaged); each tile is then only turned, not shrunk.
         small = cv2.resize(image, None, fx=k, fy=k, interpolation=cv2.INTER_AREA) if k < 1 else image
         k_small = small.shape[1] / image.shape[1]
-        c = np.array([(centre[0] + 0.5) * k_small - 0.5, (centre[1] + 0.5) * k_small - 0.5])
-        scale = k / k_small  # from the shrunk frame's pixels to the tile's
+        c = ((centre[0] + 0.5) * k_small - 0.5, (centre[1] + 0.5) * k_small - 0.5)
+        angles = [2 * math.pi * t / lay.tiles for t in range(lay.tiles)]
+        maps = [tile_affine(theta, c, radius * k_small, lay, n) for theta in angles]
+        tiles = [np.asarray(cv2.warpAffine(small, m, (n, n), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT), dtype=np.uint8)
+                 for m, _, _ in maps]  # fmt: skip
         found, scores = [], []
-        for t in range(lay.tiles):
-            theta = 2 * math.pi * t / lay.tiles
-            back = np.array([[math.cos(theta), -math.sin(theta)], [math.sin(theta), math.cos(theta)]])  # tile → frame turn
-            offset = np.array([n / 2, n + lay.start_share * radius * k])  # the centre, below the tile
-            m = np.hstack([scale * back.T, (offset - scale * back.T @ c)[:, None]])
-            tile = cv2.warpAffine(small, m, (n, n), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
-            boxes = self.tile_detector.detect_scaled(np.asarray(tile, dtype=np.uint8), 1.0)
+        for theta, (_, back, offset), boxes in zip(angles, maps, self.tile_detector.detect_batch_scaled(tiles, [1.0] * len(tiles)), strict=True):
             x = boxes.xyxy
             whole = (x[:, 0] > EDGE_PX) & (x[:, 2] < n - 1 - EDGE_PX)
             x, conf = x[whole], boxes.confidence[whole]
@@ -126,18 +128,31 @@ class RimTileDetector:
         return rotated[keep], conf[keep]
 
 
+def tile_affine(theta: float, centre: tuple[float, float], radius: float, layout: TileLayout,
+                input_px: int) -> tuple[FloatArray, FloatArray, FloatArray]:  # fmt: skip
+    """The 2 × 3 map from a frame (image circle ``centre`` and ``radius`` in its pixels) to the
+    tile at radial angle ``theta`` (radians), turned so that its sector stands upright above the
+    centre; with the turn back to the frame (2 × 2) and where the centre lies in tile pixels."""
+    k = input_px / (layout.side_share * radius)
+    back = np.array([[math.cos(theta), -math.sin(theta)], [math.sin(theta), math.cos(theta)]])  # tile → frame turn
+    offset = np.array([input_px / 2, input_px + layout.start_share * radius * k])  # the centre, below the tile
+    m = np.hstack([k * back.T, (offset - k * back.T @ np.asarray(centre, np.float64))[:, None]])
+    return m, back, offset
+
+
 RIM_TILES = "rim-tiles"
 """The name that selects this detector wherever a model is named (site file, ``--model``)."""
 TILE_MODEL = Path(__file__).resolve().parent.parent / "data" / "models" / "yolox-nano-coco.onnx"
+CENTRE_MODEL = TILE_MODEL.with_name("bevflow-person-centernet.onnx")
 
 
-def load_rim_tiles(threads: int = 2, score_threshold: float = 0.4, tile_model: str | Path | None = None) -> RimTileDetector:
-    """The rim-tile detector with the shipped YOLOX-nano (or ``tile_model``) on every tile and
-    the shipped general model for the people right under the camera."""
+def load_rim_tiles(threads: int = 2, tile_model: str | Path | None = None, **options: Unpack[DetectorOptions]) -> RimTileDetector:
+    """The rim-tile detector with the shipped tile model (or ``tile_model``) on every tile and
+    the shipped general model for the people right under the camera; ``options`` go to both."""
     from bevflow.detect.runtime import Detector  # onnxruntime is imported only when a model loads
 
-    tiles = Detector(tile_model or TILE_MODEL, threads=threads, score_threshold=score_threshold)
-    return RimTileDetector(tiles, centre=Detector(None, threads=threads, score_threshold=score_threshold))
+    tiles = Detector(tile_model or TILE_MODEL, threads=threads, **options)
+    return RimTileDetector(tiles, centre=Detector(CENTRE_MODEL, threads=threads, **options))
 
 
 def rotated_nms(rotated: FloatArray, scores: FloatArray, iou_threshold: float) -> NDArray[np.int64]:

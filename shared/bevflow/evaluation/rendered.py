@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
 
-from bevflow.detect.runtime import DEFAULT_RANGES, Detector, DetectorBank
+from bevflow.detect.runtime import RENDER_TRAINED_RANGES, Detector, DetectorBank
 from bevflow.detect.window import Window, detection_window, scaled_window
 from bevflow.detections import Boxes
 from bevflow.sim.render import FisheyeRenderer, Room
@@ -37,7 +37,7 @@ MATCH_IOU = 0.3
 
 class RenderedDetector:
     """Renders each camera of ``site`` over the static scene of ``scene`` and runs ``detector``
-    on the frames (default: the shipped model for the camera's height, ``DEFAULT_RANGES``, one
+    on the frames (default: the render-trained model for the camera's height, ``RENDER_TRAINED_RANGES``, one
     thread), within each camera's detection window
     as the detector service does (``whole_frame``: on all of it). ``boxes(frame)`` gives one
     ``Boxes`` per camera, in site order, in the calibrated cameras' pixels."""
@@ -45,8 +45,8 @@ class RenderedDetector:
     def __init__(
         self, site: Site, scene: SceneConfig, detector: Detector | None = None, seed: int = 0, whole_frame: bool = False
     ) -> None:
-        bank = DetectorBank(DEFAULT_RANGES, threads=1)
-        self.detectors = [detector if detector is not None else bank.for_height(site.camera(c.id).center[2])
+        bank = DetectorBank(RENDER_TRAINED_RANGES, threads=1)
+        self.detectors = [detector if detector is not None else _scaled_model(bank, site.camera(c.id).center[2])
                           for c in site.cameras]
         self.seed = seed
         self.style = RenderStyle.plain()
@@ -106,3 +106,12 @@ def box_iou(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float6
     area_b = np.clip(b[:, 2:] - b[:, :2], 0.0, None).prod(-1)
     union = area_a[:, None] + area_b[None] - inter
     return np.where(union > 0, inter / np.where(union > 0, union, 1.0), 0.0)
+
+
+def _scaled_model(bank: DetectorBank, height_m: float) -> Detector:
+    """The model for a camera this high; frames are rendered straight at its input scale, which
+    only a single-input model has (the rim tiles need the camera's own frame)."""
+    model = bank.for_height(height_m)
+    if not isinstance(model, Detector):
+        raise TypeError(f"a camera {height_m:g} m high would get {type(model).__name__}, which cannot take a frame rendered at its scale")
+    return model

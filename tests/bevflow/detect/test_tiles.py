@@ -33,6 +33,9 @@ class UprightBlobs:
         rows = [(x, y, x + w, y + h) for x, y, w, h, area in stats[1:count] if h > 1.3 * w and area > 4]
         return Boxes(np.array(rows, dtype=float).reshape(-1, 4), np.full(len(rows), 0.9))
 
+    def detect_batch_scaled(self, tiles: list[np.ndarray], scales: list[float]) -> list[Boxes]:
+        return [self.detect_scaled(t, s) for t, s in zip(tiles, scales, strict=True)]
+
 
 def _frame(people: list[list[float]]) -> np.ndarray:
     frame = np.zeros((440, 440, 3), np.uint8)
