@@ -171,6 +171,8 @@ def main(args: argparse.Namespace) -> int:
           f"on {', '.join(models.providers())}", flush=True)
     try:
         book = MetricsBook()
+        for camera, (model, provider) in models.runs_on().items():
+            book.set("detector_model_info", 1.0, camera=camera, model=model, provider=provider)
         with stop_on_signals() as stop, reporting(session, site_id, SERVICE, book):
             serve(inboxes, publications, worker, stats, stop, wake, book)
     finally:

@@ -37,6 +37,7 @@ from bevflow.detect.tiles import CENTRE_MODEL, RIM_TILES, TILE_MODEL, RimTileDet
 from bevflow.site import Site
 
 SHIPPED_MODELS = DEFAULT_MODEL.parent
+LABEL_MAX = 64  # characters of a metric label (bevflow.schemas.SeriesLabels)
 
 
 def shipped_model_names() -> list[str]:
@@ -118,6 +119,16 @@ class CameraModels:
         """The execution providers the loaded models run on (the first of each), for the start-up log."""
         sessions = [d.tile_detector if isinstance(d, RimTileDetector) else d for d in self.detectors.values()]
         return sorted({p[0] for d in sessions if (p := getattr(d, "providers", None))})
+
+    def runs_on(self) -> dict[str, tuple[str, str]]:
+        """Each camera's model name and the execution provider it runs on (its tile model's, for
+        rim-tiles), for the start-up log and ``/api/health``."""
+        out = {}
+        for camera, detector in self.detectors.items():
+            session = detector.tile_detector if isinstance(detector, RimTileDetector) else detector
+            providers = getattr(session, "providers", None) or ["unknown"]
+            out[camera] = (self.models()[camera][:LABEL_MAX], str(providers[0])[:LABEL_MAX])
+        return out
 
     def models(self) -> dict[str, str]:
         """The model file of each camera, for the start-up log."""

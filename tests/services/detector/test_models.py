@@ -124,6 +124,7 @@ def test_the_shipped_models_split_at_five_metres(height_m: float, model: Path) -
 
 class FakeTileDetector(FakeDetector):
     fixed_hw = (416, 416)
+    providers = ["OpenVINOExecutionProvider", "CPUExecutionProvider"]
 
 
 def test_rim_tiles_names_the_rotation_aware_detector_shared_by_the_cameras_asking_for_it(tmp_path: Path) -> None:
@@ -135,6 +136,7 @@ def test_rim_tiles_names_the_rotation_aware_detector_shared_by_the_cameras_askin
     assert models["own"].tile_detector.model_path == TILE_MODEL
     assert models["own"].centre.model_path == DEFAULT_MODEL.resolve()
     assert models.models()["own"] == "rim-tiles"
+    assert models.runs_on()["own"] == ("rim-tiles", "OpenVINOExecutionProvider")  # the provider actually used
 
 
 @pytest.mark.parametrize(

@@ -17,7 +17,7 @@ router = APIRouter(prefix="/api", tags=["health"])
 @router.get("/health", response_model=Health, summary="Live services and data flow",
             responses={NOT_OK: {"model": Health, "description": "the status is not ok: no_data, stale or degraded"}})
 def health(request: Request, response: Response, state: StateDep) -> Health:
-    body = site_health(state, getattr(request.app.state, "bus_stats", None))
+    body = site_health(state, getattr(request.app.state, "bus_stats", None), getattr(request.app.state, "service_metrics", None))
     if body.status != "ok":
         response.status_code = NOT_OK
     return body

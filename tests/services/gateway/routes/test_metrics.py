@@ -174,3 +174,19 @@ def test_a_report_cannot_add_series_of_its_own(client: TestClient, clock: FakeCl
                                             "values": [{"name": "site_ok", "value": 1}, {"name": "anything", "value": 1}]})
     client.app.state.service_metrics.put(forged)  # type: ignore[attr-defined]
     assert [k for k in scrape(client) if k[0].endswith(("anything", "anything_total"))] == []
+
+
+def test_health_and_metrics_say_which_model_and_provider_each_camera_runs(client: TestClient, clock: FakeClock) -> None:
+    book = MetricsBook()
+    book.set("detector_model_info", 1.0, camera="north", model="rim-tiles", provider="CUDAExecutionProvider")
+    book.set("detector_model_info", 1.0, camera="south", model="bevflow-person-centernet.onnx", provider="CPUExecutionProvider")
+    client.app.state.service_metrics.put(_report("detector", "d1", book, clock()))  # type: ignore[attr-defined]
+    health = client.get("/api/health").json()
+    assert health["detector_models"] == [
+        {"camera": "north", "model": "rim-tiles", "provider": "CUDAExecutionProvider", "instance": "d1"},
+        {"camera": "south", "model": "bevflow-person-centernet.onnx", "provider": "CPUExecutionProvider", "instance": "d1"},
+    ]
+    labels = (("camera", "north"), ("instance", "d1"), ("model", "rim-tiles"), ("provider", "CUDAExecutionProvider"))
+    assert scrape(client)[("bevflow_detector_model_info", labels)] == 1
+    clock.advance(60)  # the detector stopped reporting: its cameras' models are no longer claimed
+    assert client.get("/api/health").json()["detector_models"] == []
