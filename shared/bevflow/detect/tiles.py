@@ -20,9 +20,10 @@ boxes outside it.
 
 The layout (8 tiles of 0.8 × the radius from 0.1 × the radius out) suits ceilings of about 3 m,
 where people are large in the frame; ``load_rim_tiles`` builds the detector with the shipped
-YOLOX-nano (COCO, Apache-2.0: see the model card) on the tiles and the shipped render-trained
-model within 0.3 × the radius. On real frames it finds far more people than the shipped model
-alone, at many times its cost (docs/RESULTS.md, "Real frames").
+FastestDet (COCO, BSD-3-Clause: see the model card) on the tiles and the shipped render-trained
+model within 0.3 × the radius. It serves cameras under 5 m by default
+(``bevflow.detect.runtime.DEFAULT_RANGES``): on real frames it finds most people, where the
+render-trained models find few (docs/RESULTS.md, "Real frames").
 """
 
 from __future__ import annotations
@@ -142,7 +143,9 @@ def tile_affine(theta: float, centre: tuple[float, float], radius: float, layout
 
 RIM_TILES = "rim-tiles"
 """The name that selects this detector wherever a model is named (site file, ``--model``)."""
-TILE_MODEL = Path(__file__).resolve().parent.parent / "data" / "models" / "yolox-nano-coco.onnx"
+TILE_MODEL = Path(__file__).resolve().parent.parent / "data" / "models" / "fastestdet-coco.onnx"
+"""FastestDet's COCO weights (BSD-3-Clause, see the model card): eight tiles cost about what
+YOLOX-nano (``yolox-nano-coco.onnx``, also shipped, more accurate on real frames) costs on one."""
 CENTRE_MODEL = TILE_MODEL.with_name("bevflow-person-centernet.onnx")
 
 

@@ -146,3 +146,25 @@ def load_coco(weights: Path) -> FastestDet:
     model = FastestDet()
     model.load_state_dict(torch.load(Path(weights), map_location="cpu", weights_only=True))
     return model
+
+
+def export_onnx(model: FastestDet, out: Path, input_px: int) -> Path:
+    """``model`` as an ONNX file of a fixed ``input_px`` square input and a free batch size (the
+    rim-tile detector runs all of a frame's tiles in one call)."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with torch.no_grad():
+        torch.onnx.export(model.eval(), (torch.zeros(1, 3, input_px, input_px),), str(out), input_names=["images"],
+                          output_names=["output"], opset_version=18, external_data=False, dynamo=False,
+                          dynamic_axes={"images": {0: "batch"}, "output": {0: "batch"}})  # fmt: skip
+    return out
+
+
+if __name__ == "__main__":
+    import argparse
+
+    parser = argparse.ArgumentParser(description="write FastestDet's COCO weights as the rim-tile model")
+    parser.add_argument("--weights", type=Path, required=True, help="the published state dict (.pth)")
+    parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument("--input-px", type=int, default=352, help="the input it was trained at (default 352)")
+    args = parser.parse_args()
+    export_onnx(load_coco(args.weights), args.out, args.input_px)

@@ -27,7 +27,7 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 
-from bevflow.training.fastestdet import STRIDE, FastestDet, load_coco
+from bevflow.training.fastestdet import STRIDE, FastestDet, export_onnx, load_coco
 from bevflow.training.tile_samples import read_tile_shards
 
 FloatArray = NDArray[np.float64]
@@ -203,12 +203,7 @@ def export_tiles(checkpoint: Path, out: Path, input_px: int) -> Path:
     """The fine-tuned network as an ONNX file of fixed input ``input_px`` square (BGR / 255)."""
     model = FastestDet()
     model.load_state_dict(torch.load(checkpoint, map_location="cpu", weights_only=False)["model"])
-    model.eval()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    with torch.no_grad():
-        torch.onnx.export(model, (torch.zeros(1, 3, input_px, input_px),), str(out), input_names=["images"], output_names=["output"],
-                          opset_version=18, external_data=False, dynamo=False, dynamic_axes={"images": {0: "batch"}, "output": {0: "batch"}})  # fmt: skip
-    return out
+    return export_onnx(model, out, input_px)
 
 
 def main(argv: list[str] | None = None) -> int:

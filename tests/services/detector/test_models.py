@@ -4,7 +4,17 @@ from pathlib import Path
 
 import pytest
 
-from bevflow.detect.runtime import DEFAULT_MODEL, DEFAULT_RANGES, LOW_CEILING_MODEL, DetectorBank, DetectorError, HeightRange
+from bevflow.detect.runtime import (
+    DEFAULT_MODEL,
+    DEFAULT_RANGES,
+    LOW_CEILING_MODEL,
+    RENDER_TRAINED_RANGES,
+    Detector,
+    DetectorBank,
+    DetectorError,
+    HeightRange,
+)
+from bevflow.detect.tiles import TILE_MODEL, RimTileDetector
 from bevflow.site import SiteError, parse_site
 
 from bevflow_services.detector.models import CameraModels, resolve_model, shipped_model_names
@@ -20,6 +30,8 @@ cameras:
 
 class FakeDetector:
     """Stands in for ``Detector``: remembers what it was built with."""
+
+    fixed_hw = (352, 352)  # as the rim-tile model has
 
     def __init__(self, path: Path, threads: int, **options: object) -> None:
         self.model_path, self.threads, self.options = Path(path), threads, options
@@ -54,10 +66,12 @@ def test_cameras_get_their_own_model_or_the_one_for_their_height(tmp_path: Path)
     assert models["own"].model_path == own.resolve()
     assert models["own"].threads == 3
     assert models["own"].options == {"score_threshold": 0.6, "providers": ["cuda", "cpu"]}
-    # Cameras naming no model: the height ranges (by default the shipped low-ceiling model under
-    # 5 m, the general one above).
-    assert models["low"].model_path == LOW_CEILING_MODEL and models["high"].model_path == DEFAULT_MODEL
-    assert models.models() == {"low": LOW_CEILING_MODEL.name, "high": DEFAULT_MODEL.name, "own": "own.onnx"}
+    # Cameras naming no model: the height ranges (by default rim tiles under 5 m, the general
+    # model above).
+    low = models["low"]
+    assert isinstance(low, RimTileDetector) and low.tile_detector.model_path == TILE_MODEL
+    assert models["high"].model_path == DEFAULT_MODEL
+    assert models.models() == {"low": "rim-tiles", "high": DEFAULT_MODEL.name, "own": "own.onnx"}
 
 
 def test_cameras_naming_the_same_file_share_one_loaded_model(tmp_path: Path) -> None:
@@ -115,11 +129,20 @@ def test_bad_height_tables_are_refused_when_the_site_is_read(table: str, message
         parse_site((SITE % "null") + f"detectors: {table}\n")
 
 
-@pytest.mark.parametrize(("height_m", "model"), [(3.3, LOW_CEILING_MODEL), (4.99, LOW_CEILING_MODEL), (5.0, DEFAULT_MODEL),
-                                                 (8.1, DEFAULT_MODEL)])
-def test_the_shipped_models_split_at_five_metres(height_m: float, model: Path) -> None:
-    assert LOW_CEILING_MODEL.is_file() and DEFAULT_MODEL.is_file()
-    assert DetectorBank(DEFAULT_RANGES, threads=1).for_height(height_m).model_path == model
+@pytest.mark.parametrize(("height_m", "tiles"), [(3.3, True), (4.99, True), (5.0, False), (8.1, False)])
+def test_by_default_low_ceilings_get_rim_tiles_and_the_rest_the_general_model(height_m: float, tiles: bool) -> None:
+    assert TILE_MODEL.is_file() and DEFAULT_MODEL.is_file()
+    detector = DetectorBank(DEFAULT_RANGES, threads=1).for_height(height_m)
+    if tiles:
+        assert isinstance(detector, RimTileDetector) and detector.tile_detector.model_path == TILE_MODEL
+    else:
+        assert isinstance(detector, Detector) and detector.model_path == DEFAULT_MODEL
+
+
+@pytest.mark.parametrize(("height_m", "model"), [(3.3, LOW_CEILING_MODEL), (4.99, LOW_CEILING_MODEL), (5.0, DEFAULT_MODEL)])
+def test_the_render_trained_pair_splits_at_five_metres(height_m: float, model: Path) -> None:
+    detector = DetectorBank(RENDER_TRAINED_RANGES, threads=1).for_height(height_m)
+    assert isinstance(detector, Detector) and detector.model_path == model
 
 
 class FakeTileDetector(FakeDetector):
