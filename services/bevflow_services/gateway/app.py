@@ -28,6 +28,7 @@ from bevflow.site import Site
 from bevflow_services.gateway.alert_replay import RecentAlerts
 from bevflow_services.gateway.api_docs import add_api_docs
 from bevflow_services.gateway.metrics import AlertTally, ServiceMetricsStore
+from bevflow_services.gateway.trace_audit import PollAudit
 from bevflow_services.gateway.auth import Access, HashingBusy, require_role
 from bevflow_services.gateway.body_limit import BodyLimit
 from bevflow_services.gateway.cross_site import CrossSiteGuard
@@ -138,6 +139,7 @@ def create_app(
     state.alerts.observe(app.state.recent_alerts.keep)  # for ?since= replays
     app.state.alert_tally = AlertTally(state.clock)
     state.alerts.observe(app.state.alert_tally.keep)  # for /metrics
+    app.state.poll_audit = PollAudit()  # GET /api/tracks: one audit row per viewer's spell of polling
     app.state.service_metrics = ServiceMetricsStore(state.clock)  # what the services report over the bus (main feeds it)
     app.state.view3d_port = None
     app.state.history_s = getattr(state.history, "retention_ns", 3600 * 10**9) / 1e9

@@ -3,6 +3,7 @@ live streams that show where everyone is. ``/api/audit`` lists them."""
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
@@ -10,7 +11,12 @@ from contextlib import asynccontextmanager
 from fastapi import Request
 from starlette.requests import HTTPConnection
 
-from bevflow_services.gateway.auth import AccessDep, client_address, get_access
+from bevflow.units import NS_PER_S
+
+from bevflow_services.gateway.auth import Access, AccessDep, client_address, get_access
+
+POLL_QUIET_S = 600.0  # a viewer polling again after this long starts a new audited spell
+MAX_POLLERS = 10_000
 
 
 def record_trace(request: Request, access: AccessDep, action: str, track_id: int | None, detail: str = "") -> None:
@@ -18,6 +24,28 @@ def record_trace(request: Request, access: AccessDep, action: str, track_id: int
     principal = getattr(request.state, "principal", None)
     who = principal.name if principal is not None else "unknown"
     access.store.audit(access.clock(), who, action, track_id, client_address(request), detail)
+
+
+class PollAudit:
+    """Audit rows for polling a route that shows where everyone is (``GET /api/tracks``): one when
+    a viewer (name and address) starts, none again until it has been quiet ``quiet_s``, so a
+    dashboard polling every second writes one row per spell, not one per request."""
+
+    def __init__(self, quiet_s: float = POLL_QUIET_S) -> None:
+        self.quiet_ns = int(quiet_s * NS_PER_S)
+        self._last: dict[tuple[str, str], int] = {}
+        self._lock = threading.Lock()
+
+    def record(self, request: Request, access: Access, action: str) -> None:
+        principal = getattr(request.state, "principal", None)
+        who, client, now = (principal.name if principal is not None else "unknown"), client_address(request), access.clock()
+        with self._lock:
+            last = self._last.get((who, client))
+            self._last[(who, client)] = now
+            if len(self._last) > MAX_POLLERS:  # forget the longest quiet, so the table stays small
+                del self._last[min(self._last, key=self._last.__getitem__)]
+        if last is None or now - last > self.quiet_ns:
+            access.store.audit(now, who, action, None, client, f"polling started (again within {self.quiet_ns // NS_PER_S} s of a poll: not recorded)")
 
 
 @asynccontextmanager

@@ -56,8 +56,12 @@ class Contacts(BaseModel):
 
 
 @router.get("", response_model=TracksNow, summary="Tracks now")
-def tracks_now(state: StateDep, site: SiteDep, zone: ZoneParam = None, limit: Limit = 100, offset: Offset = 0) -> TracksNow:
+def tracks_now(state: StateDep, site: SiteDep, request: Request, access: AccessDep, zone: ZoneParam = None, limit: Limit = 100,
+               offset: Offset = 0) -> TracksNow:  # fmt: skip
+    """Where everyone is now. Polling it rebuilds paths, so it is audited like the live stream:
+    one row when a viewer starts polling (again after ten quiet minutes)."""
     check_zone(site, zone)
+    request.app.state.poll_audit.record(request, access, "live_tracks")
     latest = state.tracks
     people = [] if latest is None else [t for t in latest.tracks if zone is None or zone in t.zones]
     people.sort(key=lambda t: t.id)

@@ -90,3 +90,22 @@ def test_contacts_join_the_fragments_of_one_person_found_again_under_a_new_id(cl
     assert [(c["track"], c["tracks"], c["duration_s"]) for c in merged] == [(5, [5, 6], 8.0)]
     apart = client.get("/api/tracks/1/contacts?merge=false").json()["contacts"]
     assert [(c["track"], c["duration_s"]) for c in apart] == [(5, 4.0), (6, 4.0)]
+
+
+def test_polling_where_everyone_is_is_audited_once_per_spell(site, state: GatewayState) -> None:
+    from bevflow.units import NS_PER_S
+    from tests.services.gateway.access import bearer, secured_client
+
+    now = [T0]
+    with secured_client(site, state) as (client, secure):
+        secure.access.clock = lambda: now[0]
+        polls = [("viewer", 0), ("viewer", 1), ("viewer", 590), ("operator", 591), ("viewer", 1200), ("viewer", 1790)]
+        for role, at_s in polls:
+            now[0] = T0 + at_s * NS_PER_S
+            assert client.get("/api/tracks", headers=bearer(secure.tokens[role])).status_code == 200
+        rows, _ = secure.access.store.audit_log(limit=50)  # newest first
+    # A poll within ten minutes of the viewer's own last one continues its spell: 590 s (589 s
+    # after 1 s) and 1790 s do; 1200 s comes 610 s after the viewer's poll at 590 s, though only
+    # 609 s after someone else's.
+    assert [(e.user, e.action, (e.time_ns - T0) // NS_PER_S) for e in reversed(rows)] == [
+        ("viewer", "live_tracks", 0), ("operator", "live_tracks", 591), ("viewer", "live_tracks", 1200)]
