@@ -97,4 +97,4 @@ def test_dockerfile_gives_the_data_folder_to_its_user_and_checks_health() -> Non
     assert re.search(r"chown bevflow:bevflow /data", DOCKERFILE[:user])
     assert DOCKERFILE.index('VOLUME ["/data"]') > user
     assert 'CMD ["bevflow", "healthcheck", "container"]' in DOCKERFILE
-    assert "pip install -c constraints.txt ." in DOCKERFILE
+    assert 'pip install -c constraints.txt ".[all]"' in DOCKERFILE

@@ -108,9 +108,12 @@ def markdown(result: dict, command: str, note: str = "") -> str:
 
 
 def part_lines(name: str, part: dict) -> list[str]:
-    """One part's results as lines of text; a part that failed shows its error's last line."""
+    """One part's results as lines of text; a part that failed shows its error's last line, one
+    that could not run (``suite.Unavailable``) why."""
     if "error" in part:
         return [f"failed: {part['error'].strip().splitlines()[-1]}"]
+    if part.get("reason"):
+        return [f"not measured: {part['reason']}"]
     return PART_TABLES[name](part)
 
 
@@ -133,8 +136,6 @@ def _tracking(part: dict) -> list[str]:
 
 
 def _detector(part: dict) -> list[str]:
-    if part.get("reason"):
-        return [f"not measured: {part['reason']}"]
     return [f"{r['height_m']:.1f} m, {r['threads']} threads: frame {r['frame']} -> input {r['input']}: "
             f"{_number(r['ms_p50'])} ms p50, {_number(r['ms_p90'])} ms p90, {r['boxes']} boxes" for r in part["rows"]]
 

@@ -211,7 +211,7 @@ def run_suite(settings: Settings, parts: tuple[str, ...] = PARTS, detector_model
         echo(f"-- {part} ...")
         start = time.monotonic()
         try:
-            head, details = runners[part]()
+            head, details = _run_part(runners[part])
         except Unavailable as exc:
             head, details = {}, {**exc.details, "reason": exc.reason}
             result["null_reasons"] |= {k: exc.reason for k in keys}
@@ -235,6 +235,20 @@ def run_suite(settings: Settings, parts: tuple[str, ...] = PARTS, detector_model
     ready = json_ready({**ordered, **result})
     assert isinstance(ready, dict)  # json_ready keeps a dict a dict
     return ready
+
+
+def _run_part(runner: Callable[[], tuple[Headline, dict]]) -> tuple[Headline, dict]:
+    """``runner``'s result; a part whose optional dependency is not installed is ``Unavailable``,
+    naming the extra (any other missing module is a failure)."""
+    from bevflow_services import extras
+
+    try:
+        return runner()
+    except ModuleNotFoundError as exc:
+        extra = extras.extra_for(exc)
+        if extra is None:
+            raise
+        raise Unavailable(f"this part {extras.install_hint(extra)}") from None
 
 
 def json_ready(value: object) -> object:

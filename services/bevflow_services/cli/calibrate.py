@@ -44,6 +44,7 @@ from bevflow.schemas import CameraCylinders
 from bevflow.site import CameraConfig, Site, SiteError, Thresholds, load_site, load_site_or_builtin
 from bevflow.site_edit import update_camera_file
 
+from bevflow_services.bus_flags import add_bus_arguments
 from bevflow_services.runtime import UserError
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
@@ -298,9 +299,7 @@ def _register_check(steps: argparse._SubParsersAction) -> None:
                    help="isolated: only people alone in an overlap (default); fusion: what fusion merges at --gate")
     p.add_argument("--min-samples", type=int, default=20, metavar="N", help="judge only pairs with at least N samples, a sample being one person seen by both cameras in one frame (default 20)")
     p.add_argument("--tolerance", type=float, metavar="M", help="flag pairs whose median offset is above M (default: the site's fusion distance)")
-    from bevflow_services import bus
-
-    bus.add_bus_arguments(p)
+    add_bus_arguments(p)
     p.set_defaults(func=run_check)
 
 

@@ -55,8 +55,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from bevflow_services import extras
     from bevflow_services.launcher import TEMPORARY_DB, ServiceGroup, start_pipeline
 
+    extras.require("services")  # here, not as each service it starts fails on its own
     for port in (args.port, args.port + 1):
         with socket.socket() as probe:
             try:
@@ -77,7 +79,8 @@ def run(args: argparse.Namespace) -> int:
                "replayed": f"the boxes recorded in {args.detections}"}[boxes]
         print(f"bevflow demo is running ({len(group.children)} services, {how}, logs in {log_dir})")
         print(f"  dashboard  {base}/")
-        print(f"  3D view    {base}/view3d/")
+        view3d = f"{base}/view3d/" if extras.missing_module("view3d") is None else f"off: it {extras.install_hint('view3d')}"
+        print(f"  3D view    {view3d}")
         print(f"  REST API   {base}/docs")
         print("Stop with Ctrl-C." if args.duration is None else f"Stopping after {args.duration:g} s.", flush=True)
         deadline = None if args.duration is None else time.monotonic() + args.duration

@@ -21,7 +21,7 @@ import urllib.request
 from pathlib import Path
 from typing import Any
 
-from bevflow_services import bus
+from bevflow_services.bus_flags import add_bus_arguments
 from bevflow_services.cli.environment import apply_environment
 from bevflow_services.runtime import UserError, service_site
 
@@ -61,7 +61,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="bus services: the site file or built-in site name the service runs with")
     parser.add_argument("--any-host", action="store_true",
                         help="bus services: count an instance on any host, not only this one")
-    bus.add_bus_arguments(parser)
+    add_bus_arguments(parser)
     parser.set_defaults(func=handler, parser=parser)
 
 
@@ -104,6 +104,8 @@ def gateway_up(url: str, timeout: float) -> tuple[bool, str]:
 
 
 def bus_service_up(args: argparse.Namespace) -> tuple[bool, str]:
+    from bevflow_services import bus  # here: the router and gateway checks work without the 'services' extra
+
     _site, site_id = service_site(args)
     host = bus.default_instance_id().rsplit("-", 1)[0]
     wanted = args.service

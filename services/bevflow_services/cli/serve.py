@@ -2,10 +2,12 @@
 
 Each service is a package ``bevflow_services.<service>`` whose ``main`` module has
 ``main(args) -> int`` and, optionally, ``add_arguments(parser)`` for its own flags. Every service
-gets ``--site-id`` and the bus flags of :func:`bevflow_services.bus.add_bus_arguments`; all but the
-router also get a required ``--site``. A service's module is imported (by its loader in
+gets ``--site-id`` and the bus flags of :func:`bevflow_services.bus_flags.add_bus_arguments`; all
+but the router also get a required ``--site``. A service's module is imported (by its loader in
 ``LOADERS``) only when it is started, so one service's heavy or missing dependencies never slow or
-break the others.
+break the others. The bus (zenoh, of the 'services' extra) too is imported only when a service
+starts, so that the other commands work without the extras. A missing optional dependency reaches
+``bevflow``'s ``main`` as the ``ModuleNotFoundError`` naming it, which says which extra to install.
 """
 
 from __future__ import annotations
@@ -15,7 +17,8 @@ import logging
 from collections.abc import Callable, Mapping
 from types import ModuleType
 
-from bevflow_services import bus, redact
+from bevflow_services import redact
+from bevflow_services.bus_flags import add_bus_arguments
 from bevflow_services.cli import environment
 from bevflow_services.runtime import UserError
 
@@ -118,6 +121,8 @@ def handler(args: argparse.Namespace) -> int:
 def run_service(name: str, argv: list[str], *, loaders: Mapping[str, Loader] | None = None,
                 package: str = PACKAGE) -> int:
     """Parse ``argv`` with the service's parser and run its ``main``."""
+    from bevflow_services import bus
+
     module = load_service(name, loaders=loaders, package=package)
     args = parse_service_args(service_parser(name, module), argv)
     logging.basicConfig(level=args.log_level.upper(), format=f"%(asctime)s {name} %(levelname)s %(name)s: %(message)s")
@@ -131,7 +136,8 @@ def run_service(name: str, argv: list[str], *, loaders: Mapping[str, Loader] | N
 
 def load_service(name: str, *, loaders: Mapping[str, Loader] | None = None, package: str = PACKAGE) -> ModuleType:
     """The service's ``main`` module, from its loader (``LOADERS`` unless given; ``package`` is
-    where those loaders import from); ``UserError`` when this build lacks it or a package it needs."""
+    where those loaders import from); ``UserError`` when this build lacks it, the
+    ``ModuleNotFoundError`` itself when the module needs a package that is not installed."""
     module_name = f"{package}.{name}.main"
     loader = (LOADERS if loaders is None else loaders).get(name)
     if loader is None:
@@ -142,9 +148,6 @@ def load_service(name: str, *, loaders: Mapping[str, Loader] | None = None, pack
         missing = exc.name or ""
         if module_name == missing or module_name.startswith(missing + "."):
             raise UserError(f"service {name} is not available in this build") from None
-        top = missing.split(".")[0]
-        if top not in (package, "bevflow"):
-            raise UserError(f"service {name} needs the Python package '{top}', which is not installed") from None
         raise
     if not callable(getattr(module, "main", None)):
         raise UserError(f"service {name} is not available in this build (its module has no main)")
@@ -166,7 +169,7 @@ def service_parser(name: str, module: ModuleType) -> argparse.ArgumentParser:
                         "(default: the 'site' name in the site file)")
     parser.add_argument("--log-level", default="info", choices=["debug", "info", "warning", "error"],
                         help="how much the service logs (default info)")
-    bus.add_bus_arguments(parser, mode=not is_router)
+    add_bus_arguments(parser, mode=not is_router)
     add_arguments = getattr(module, "add_arguments", None)
     if add_arguments is not None:
         add_arguments(parser)
@@ -177,6 +180,8 @@ def service_parser(name: str, module: ModuleType) -> argparse.ArgumentParser:
 
 def parse_service_args(parser: argparse.ArgumentParser, argv: list[str]) -> argparse.Namespace:
     """Parse, and check that a given ``--site-id`` fits in a bus key."""
+    from bevflow_services import bus
+
     args = parser.parse_args(argv)
     if args.site_id is not None:
         try:

@@ -136,17 +136,9 @@ def _render_eval(args: argparse.Namespace) -> int:
     return 0
 
 
-def _torch_training():  # noqa: ANN202
-    try:
-        from bevflow.training import train
-    except ImportError as exc:
-        raise UserError(f"training needs torch ({exc.name} is missing): pip install 'bevflow[train]'") from None
-    return train
-
-
 def _train(args: argparse.Namespace) -> int:
-    train_mod = _torch_training()
     from bevflow.detect.coco import CocoError, read_coco
+    from bevflow.training import train as train_mod  # torch: without the 'train' extra, `bevflow` names it
 
     if args.data is None and args.coco is None:
         raise UserError("give --data DIR (rendered shards), --coco FILE (your frames), or both")
@@ -173,8 +165,7 @@ def _train(args: argparse.Namespace) -> int:
 
 
 def _export(args: argparse.Namespace) -> int:
-    _torch_training()
-    from bevflow.training.export import export_onnx, load_checkpoint
+    from bevflow.training.export import export_onnx, load_checkpoint  # torch and onnx: the 'train' extra
 
     if not args.checkpoint.is_file():
         raise UserError(f"--checkpoint {args.checkpoint} does not exist")

@@ -38,7 +38,7 @@ from bevflow.schemas import (
     Tracks,
 )
 
-from bevflow_services import redact
+from bevflow_services import extras, redact
 from bevflow_services.bus import (
     FRAMES,
     AsyncSubscription,
@@ -129,7 +129,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--view3d-port", type=int, default=None,
                        help="loopback port of the 3D view, which the gateway serves at /view3d/ behind its login "
                        "(default: --port + 1; the next free one if taken)")
-    group.add_argument("--no-view3d", action="store_true", help="do not start the 3D view")
+    group.add_argument("--no-view3d", action="store_true",
+                       help="do not start the 3D view (nor does the gateway without the 'view3d' extra)")
     group.add_argument("--history-s", type=float, default=3600.0,
                        help="seconds of occupancy, alert and trajectory history kept in memory (default 3600)")
     group.add_argument("--db", default=None, metavar="URL",
@@ -195,6 +196,21 @@ def proxy_options(trusted: list[str]) -> dict[str, Any]:
     return {"proxy_headers": bool(trusted), "forwarded_allow_ips": ",".join(trusted)}
 
 
+def view3d_port_from_args(args: argparse.Namespace) -> int | None:
+    """The 3D view's port, or None for no 3D view: --no-view3d, or viser (the 'view3d' extra) not
+    installed. Asked for by --view3d-port, its absence raises the ``ModuleNotFoundError`` that
+    ``bevflow`` turns into the line naming the extra; by default the gateway serves without it."""
+    if args.no_view3d:
+        return None
+    if args.view3d_port:
+        extras.require("view3d")
+        return int(args.view3d_port)
+    if extras.missing_module("view3d") is not None:
+        log.warning("no 3D view: it %s", extras.install_hint("view3d"))
+        return None
+    return int(args.port) + 1
+
+
 def announce_setup(access: Access, args: argparse.Namespace) -> None:
     """First run: with no users yet, log the one-time link that creates the first admin."""
     if not access.enabled:
@@ -215,7 +231,7 @@ def main(args: argparse.Namespace) -> int:
     site, site_id = service_site(args)
     access = access_from_args(args)
     proxies = proxy_options(args.trusted_proxy)
-    view3d_port = None if args.no_view3d else (args.view3d_port or args.port + 1)
+    view3d_port = view3d_port_from_args(args)
     session = open_session(config_from_args(args))
     stats = BusStats()
     state = GatewayState(site, history_store(args.db, args.history_s), site_id=site_id)

@@ -6,6 +6,7 @@ import math
 import pytest
 
 from bevflow_services.benchmarks import suite
+from bevflow_services.benchmarks.report import console_lines
 from bevflow_services.benchmarks.suite import HEADLINE_KEYS, PARTS, Settings, json_ready, run_suite
 
 TINY = Settings(cylinder_boxes=(5, 50), cylinder_repeats=1, cylinder_reference_repeats=1, cylinder_reference_max_boxes=5,
@@ -50,6 +51,26 @@ def test_an_unavailable_detector_is_null_with_its_reason_not_a_failure(monkeypat
     assert result["failed"] == []
     assert result["detector_ms_per_frame_3_3m_2_threads"] is None
     assert result["null_reasons"]["detector_ms_per_frame_3_3m_2_threads"] == "no detector model shipped"
+
+
+@pytest.mark.parametrize(
+    ("missing", "failed", "reason"),
+    [
+        ("zenoh", [], "this part needs the 'services' extra: pip install 'bevflow[services]'"),  # not installed: null, why
+        ("not_a_real_package_for_bevflow_tests", ["bus"], "the bus part failed: ModuleNotFoundError"),  # a bug: a failure
+    ],
+)
+def test_a_part_without_its_extra_is_null_naming_it(monkeypatch: pytest.MonkeyPatch, missing: str, failed: list[str],
+                                                    reason: str) -> None:
+    def needs(settings: Settings) -> None:
+        raise ModuleNotFoundError(f"No module named {missing!r}", name=missing)
+
+    monkeypatch.setattr(suite, "run_bus", needs)
+    result = run_suite(TINY, ("bus",), echo=lambda line: None)
+    assert result["failed"] == failed
+    assert result["bus_frame_p99_ms"] is None and result["null_reasons"]["bus_frame_p99_ms"].startswith(reason)
+    if not failed:
+        assert f"not measured: {reason}" in console_lines(result)
 
 
 def test_tracking_skips_crush_densities_and_reports_the_big_case(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -4,23 +4,25 @@
 
 Peak occupancy, crowded intervals, distance violations by zone and hour, over-capacity alerts
 with their durations, and charts of occupancy and violations (``daily_report``,
-``report_render``). The day runs from local midnight to local midnight in ``tz``.
+``report_render``). The day runs from local midnight to local midnight in ``tz``. HTML and PDF
+need reportlab (the 'reports' extra): without it they answer 501 saying so, and JSON still works.
 """
 
 from __future__ import annotations
 
 import re
 from datetime import UTC, date, datetime, tzinfo
+from types import ModuleType
 from typing import Annotated, Any, Literal
 from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
 from fastapi import APIRouter, HTTPException, Query
 from fastapi.responses import HTMLResponse, Response
 
+from bevflow_services import extras
 from bevflow_services.gateway.auth_headers import content_security_policy
 from bevflow_services.gateway.daily_report import DailyReport, build_daily_report
 from bevflow_services.gateway.params import StateDep
-from bevflow_services.gateway.report_render import STYLE_HASH, render_html, render_pdf
 from bevflow.units import NS_PER_S
 
 router = APIRouter(prefix="/api/reports", tags=["reports"])
@@ -45,6 +47,18 @@ def time_zone(name: str) -> tzinfo:
         raise HTTPException(400, f"tz: unknown time zone {name!r}; use an IANA name such as Europe/Paris or UTC") from None
 
 
+def renderer() -> ModuleType:
+    """The HTML and PDF renderer; 501 naming the extra where reportlab is not installed."""
+    try:
+        from bevflow_services.gateway import report_render
+    except ModuleNotFoundError as exc:
+        if extras.extra_for(exc) != "reports":
+            raise
+        raise HTTPException(501, f"HTML and PDF reports: the gateway {extras.install_hint('reports')} "
+                                 "(format=json works without it)") from None
+    return report_render
+
+
 @router.get("/daily", response_model=DailyReport, responses=RESPONSES, summary="The daily report (JSON, HTML or PDF)")
 def daily_report(state: StateDep, day: DateParam = None, tz: TimezoneParam = "UTC", fmt: ReportFormat = "json") -> Any:
     zone = time_zone(tz)
@@ -54,10 +68,11 @@ def daily_report(state: StateDep, day: DateParam = None, tz: TimezoneParam = "UT
         raise HTTPException(400, f"date: {day.isoformat()} is outside {FIRST_DAY} to {LAST_DAY}")
     report = build_daily_report(state.site, state.history, day, zone, tz)
     if fmt == "html":  # the gateway's policy, plus the report's own stylesheet
-        policy = content_security_policy("/api/reports/daily", style_hashes=[STYLE_HASH])
-        return HTMLResponse(render_html(report, zone), headers={"Content-Security-Policy": policy})
+        render = renderer()
+        policy = content_security_policy("/api/reports/daily", style_hashes=[render.STYLE_HASH])
+        return HTMLResponse(render.render_html(report, zone), headers={"Content-Security-Policy": policy})
     if fmt == "pdf":
         name = re.sub(r"[^A-Za-z0-9_.-]", "_", f"report-{state.site.site}-{report.date}")
-        return Response(render_pdf(report, zone), media_type="application/pdf",
+        return Response(renderer().render_pdf(report, zone), media_type="application/pdf",
                         headers={"Content-Disposition": f'inline; filename="{name}.pdf"'})
     return report

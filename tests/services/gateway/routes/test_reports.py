@@ -5,6 +5,7 @@ from __future__ import annotations
 import base64
 import hashlib
 import re
+import sys
 import zlib
 from collections.abc import Iterator
 from pathlib import Path
@@ -14,6 +15,7 @@ from fastapi.testclient import TestClient
 
 from bevflow.site import Site
 
+import bevflow_services.gateway
 from tests.services.gateway.feed import S, FakeClock, incident, occupancy, over_capacity, violation
 from tests.services.gateway.routes.test_history import History, gateway_over
 
@@ -152,3 +154,16 @@ def test_an_empty_day_still_renders(client: TestClient) -> None:
 def test_bad_report_requests_name_the_parameter(client: TestClient, query, status, message) -> None:
     response = client.get(f"/api/reports/daily?{query}")
     assert response.status_code == status and message in response.text
+
+
+@pytest.mark.parametrize("fmt", ["html", "pdf"])
+def test_without_reportlab_html_and_pdf_answer_501_naming_the_extra(client: TestClient, monkeypatch: pytest.MonkeyPatch,
+                                                                     fmt: str) -> None:
+    # As on a gateway installed without the 'reports' extra: reportlab, and so the renderer, cannot be imported.
+    for name in ["reportlab", *(n for n in sys.modules if n.startswith("reportlab."))]:
+        monkeypatch.setitem(sys.modules, name, None)
+    monkeypatch.delitem(sys.modules, "bevflow_services.gateway.report_render", raising=False)
+    monkeypatch.delattr(bevflow_services.gateway, "report_render", raising=False)
+    response = client.get(f"/api/reports/daily?date=2020-01-01&format={fmt}")
+    assert response.status_code == 501 and "pip install 'bevflow[reports]'" in response.json()["detail"]
+    assert client.get("/api/reports/daily?date=2020-01-01").status_code == 200  # JSON needs nothing more
