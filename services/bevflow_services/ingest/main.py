@@ -6,9 +6,12 @@
     bevflow serve ingest --site site.yaml --detections DIR --fps 4   # a recording of boxes (no detector)
 
 Real cameras: each camera's ``source`` (RTSP/HTTP URL, video file or image folder) is read on
-its own thread and its newest frame published with its capture time and sequence number; a
-camera that drops is reopened with backoff and the others go on. A slow network gets the latest
-frame, not a backlog: frames not yet sent are overwritten (counted).
+its own thread (through FFmpeg, ``sources``) and its newest frame published with its capture time
+(from the stream's own timestamps) and sequence number; a video file plays at its own frame rate.
+A camera that drops, or stalls for ``--read-timeout``, is reopened with backoff and the others go
+on; its frames stop meanwhile, which is how camera health (the tracker's ``camera_down``, the
+gateway's ``/api/cameras``) sees it. A slow network gets the latest frame, not a backlog: frames
+not yet sent are overwritten (counted).
 
 Simulation: a crowd walks through the site in real time, and the simulator's ground truth is
 published for scoring. With ``--render`` every camera's view is rendered through its own fisheye
@@ -42,7 +45,7 @@ from bevflow.site import Site
 
 from bevflow_services import bus
 from bevflow_services.ingest import replay
-from bevflow_services.ingest.sources import LatestFrameReader
+from bevflow_services.ingest.sources import LatestFrameReader, Timeouts
 from bevflow_services.runtime import UserError, service_site, stop_on_signals
 
 log = logging.getLogger(__name__)
@@ -66,6 +69,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        help="simulation with --render: frames per second each camera publishes (default: the "
                        "scene's rate, 10); lower it when the detector cannot keep up with every camera")
     group.add_argument("--folder-fps", type=float, default=10.0, help="frame rate of image-folder sources")
+    group.add_argument("--open-timeout", type=float, default=Timeouts.open_s, metavar="S",
+                       help=f"seconds a camera stream may take to open before it is retried (default {Timeouts.open_s:g})")
+    group.add_argument("--read-timeout", type=float, default=Timeouts.read_s, metavar="S",
+                       help=f"seconds without data after which an open stream counts as broken and is reopened "
+                       f"(default {Timeouts.read_s:g}; keep it under the tracker's --camera-timeout)")
     group.add_argument("--detections", type=Path, metavar="DIR",
                        help="publish a recording of a detector's boxes instead of reading the cameras: DIR/<camera id>.txt "
                        "with MOTChallenge rows frame,id,left,top,width,height,confidence,... (no detector needed)")
@@ -192,6 +200,13 @@ def camera_frame_stride(scene_fps: float, camera_fps: float | None) -> int:
     return max(1, round(scene_fps / camera_fps))
 
 
+def stream_timeouts(args: argparse.Namespace) -> Timeouts:
+    if args.open_timeout <= 0 or args.read_timeout <= 0:
+        raise UserError(f"--open-timeout and --read-timeout must be above 0, got {args.open_timeout:g} "
+                        f"and {args.read_timeout:g}")
+    return Timeouts(open_s=args.open_timeout, read_s=args.read_timeout)
+
+
 def stream(session, keys: bus.Keys, site: Site, cameras: list[str], args: argparse.Namespace, stop) -> None:
     configured = {c.id: c.source for c in site.cameras if c.id in cameras}
     missing = sorted(c for c, s in configured.items() if not s)
@@ -199,7 +214,9 @@ def stream(session, keys: bus.Keys, site: Site, cameras: list[str], args: argpar
         raise UserError(f"cameras {', '.join(missing)} have no 'source' in the site file; "
                         "give each a stream URL, video file or image folder, or run with --simulate")
     sources = {c: s for c, s in configured.items() if s}
-    readers = {c: LatestFrameReader(s, folder_fps=args.folder_fps).start() for c, s in sources.items()}
+    timeouts = stream_timeouts(args)
+    readers = {c: LatestFrameReader(s, folder_fps=args.folder_fps, timeouts=timeouts).start()
+               for c, s in sources.items()}
     publications = {c: bus.Publication(session, keys.frame(c), bus.FRAMES) for c in cameras}
     print(f"bevflow ingest: reading {len(cameras)} cameras of {site.site!r}", flush=True)
     while not stop.is_set():

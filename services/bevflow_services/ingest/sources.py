@@ -1,9 +1,11 @@
 """Camera sources: RTSP/HTTP streams, video files and image folders, read into BGR frames.
 
 A source is read on its own thread and only its newest frame is kept, so a slow consumer gets
-the latest picture, never a backlog. A stream that fails is reopened with exponential backoff
-(1 s doubling up to 30 s) and its state (``up``, ``reconnects``, ``last_error``) is visible for
-health reporting. Frames are stamped with their capture time as read (integer ns).
+the latest picture, never a backlog. A stream that fails, or stalls for longer than its read
+timeout, is reopened with exponential backoff (1 s doubling up to 30 s) and its state (``up``,
+``reconnects``, ``last_error``) is visible for health reporting. Streams and video files are read
+through FFmpeg (``video``) and stamped from their own timestamps; an image folder's pictures are
+stamped when read (integer ns).
 """
 
 from __future__ import annotations
@@ -18,7 +20,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from bevflow_services.ingest.errors import SourceError
+from bevflow_services.ingest.video import DEFAULT_TIMEOUTS, Timeouts, video_frames
 from bevflow_services.redact import redact
+
+__all__ = ["CapturedFrame", "LatestFrameReader", "SourceError", "Timeouts", "read_frames"]
 
 log = logging.getLogger(__name__)
 
@@ -32,30 +38,18 @@ class CapturedFrame:
     image: np.ndarray  # H x W x 3 uint8, BGR
 
 
-class SourceError(RuntimeError):
-    """A source that cannot be opened or read (the message names it)."""
-
-
-def read_frames(source: str, folder_fps: float = 10.0) -> Iterator[np.ndarray]:
-    """The frames of one source until it ends or breaks (``SourceError``)."""
+def read_frames(source: str, folder_fps: float = 10.0,
+                timeouts: Timeouts = DEFAULT_TIMEOUTS) -> Iterator[tuple[int, np.ndarray]]:
+    """(capture time ns, BGR image) for each frame of one source until it ends or breaks
+    (``SourceError``)."""
     path = Path(source)
     if path.is_dir():
         yield from _folder_frames(path, folder_fps)
         return
-    capture = cv2.VideoCapture(source)
-    if not capture.isOpened():
-        raise SourceError(f"cannot open camera source {redact(source)!r}")
-    try:
-        while True:
-            ok, image = capture.read()
-            if not ok or image is None:
-                raise SourceError(f"camera source {redact(source)!r} stopped delivering frames")
-            yield image
-    finally:
-        capture.release()
+    yield from video_frames(source, timeouts)
 
 
-def _folder_frames(folder: Path, fps: float) -> Iterator[np.ndarray]:
+def _folder_frames(folder: Path, fps: float) -> Iterator[tuple[int, np.ndarray]]:
     files = sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
     if not files:
         raise SourceError(f"image folder {folder} holds no images ({', '.join(sorted(IMAGE_SUFFIXES))})")
@@ -65,7 +59,7 @@ def _folder_frames(folder: Path, fps: float) -> Iterator[np.ndarray]:
         if image is None:
             log.warning("skipping %s: not a readable image", file)
             continue
-        yield image
+        yield time.time_ns(), image
         time.sleep(max(0.0, 1.0 / fps - (time.monotonic() - started)))
     raise SourceError(f"image folder {folder} has no more images")
 
@@ -75,9 +69,10 @@ class LatestFrameReader:
     frame not yet taken. ``loop=False`` stops at the end of a file or folder instead."""
 
     def __init__(self, source: str, folder_fps: float = 10.0, loop: bool = True,
-                 backoff_s: tuple[float, float] = (1.0, 30.0)) -> None:
+                 backoff_s: tuple[float, float] = (1.0, 30.0), timeouts: Timeouts = DEFAULT_TIMEOUTS) -> None:
         self.source = source
         self.folder_fps = folder_fps
+        self.timeouts = timeouts
         self.loop = loop
         self.backoff_s = backoff_s
         self.up = False
@@ -110,8 +105,8 @@ class LatestFrameReader:
         delay = self.backoff_s[0]
         while not self._stop.is_set():
             try:
-                for image in read_frames(self.source, self.folder_fps):
-                    self._publish(image)
+                for capture_ns, image in read_frames(self.source, self.folder_fps, self.timeouts):
+                    self._publish(capture_ns, image)
                     delay = self.backoff_s[0]
                     if self._stop.is_set():
                         return
@@ -119,19 +114,24 @@ class LatestFrameReader:
                 self.last_error = str(exc)
             except cv2.error as exc:
                 self.last_error = redact(f"camera source {self.source!r}: {exc}")
+            except Exception as exc:  # a reader outlives whatever its source does; the others never notice
+                log.exception("reading camera source %s", redact(self.source))
+                self.last_error = redact(f"camera source {self.source!r}: {type(exc).__name__}: {exc}")
             self.up = False
             if not self.loop:
                 return
-            log.warning("%s; retrying in %.0f s", self.last_error, delay)
+            log.warning("%s; retrying in %g s", self.last_error, delay)
             self.reconnects += 1
             self._stop.wait(delay)
             delay = min(delay * 2, self.backoff_s[1])
 
-    def _publish(self, image: np.ndarray) -> None:
+    def _publish(self, capture_ns: int, image: np.ndarray) -> None:
         with self._ready:
             if self._latest is not None:
                 self.frames_overwritten += 1
-            self._latest = CapturedFrame(self.frames_read, time.time_ns(), image)
+            if not self.up and self.reconnects:
+                log.info("camera source %s delivers frames again", redact(self.source))
+            self._latest = CapturedFrame(self.frames_read, capture_ns, image)
             self.frames_read += 1
             self.up = True
             self._ready.notify_all()

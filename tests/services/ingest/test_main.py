@@ -1,4 +1,4 @@
-"""The ingest's simulation modes: rendered frames in step across cameras, with ground truth."""
+"""The ingest's command line and simulation modes: rendered frames in step across cameras, with ground truth."""
 
 from __future__ import annotations
 
@@ -15,6 +15,7 @@ from bevflow.site import parse_site
 from bevflow_services import bus
 from bevflow_services.cli.serve import service_parser
 from bevflow_services.ingest import main as ingest
+from bevflow_services.ingest.sources import Timeouts
 from bevflow_services.launcher import free_port
 from bevflow_services.runtime import UserError
 
@@ -51,6 +52,20 @@ def test_camera_fps_publishes_every_nth_scene_frame(camera_fps, expected) -> Non
 def test_camera_fps_needs_rendered_frames() -> None:
     with pytest.raises(UserError, match="--camera-fps.*--simulate --render"):
         ingest.main(args_for("--simulate", "--camera-fps", "2"))
+
+
+@pytest.mark.parametrize(
+    ("argv", "expected"),
+    [((), Timeouts()), (("--open-timeout", "4", "--read-timeout", "1.5"), Timeouts(open_s=4, read_s=1.5)),
+     (("--read-timeout", "0"), UserError), (("--open-timeout", "-1"), UserError)],
+)
+def test_stream_timeouts_come_from_the_command_line(argv, expected) -> None:
+    if expected is UserError:
+        with pytest.raises(UserError, match="--open-timeout and --read-timeout must be above 0"):
+            ingest.stream_timeouts(args_for(*argv))
+    else:
+        assert ingest.stream_timeouts(args_for(*argv)) == expected
+    assert Timeouts().read_s < 5  # a stall shows before camera health's 5 s of silence would call the camera down
 
 
 def test_rendered_frames_come_in_step_with_the_ground_truth() -> None:
