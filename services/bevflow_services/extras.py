@@ -27,6 +27,7 @@ EXTRA_OF_MODULE: dict[str, str] = {
     "fastapi_offline": "services",
     "prometheus_client": "services",
     "paho": "services",
+    "av": "services",  # the ingest's camera streams and video files
     "viser": "view3d",
     "psycopg": "postgres",
     "reportlab": "reports",
