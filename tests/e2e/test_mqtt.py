@@ -1,6 +1,7 @@
 """``bevflow serve mqtt`` against a real broker (Debian's mosquitto, started here): alerts raised
 while the broker is down all arrive once it is back, once each and in order; occupancy is
-retained and announced to Home Assistant. Skipped, saying so, when mosquitto is not installed (``./run test`` installs it)."""
+retained and announced to Home Assistant; an open alert nobody renews is published again, ended.
+Skipped, saying so, when mosquitto is not installed (``./run test`` installs it)."""
 
 from __future__ import annotations
 
@@ -16,11 +17,12 @@ from pathlib import Path
 import paho.mqtt.client as mqtt
 import pytest
 
-from bevflow.schemas import Event
+from bevflow.schemas import Event, OpenAlerts
 
 from bevflow_services import bus
 from bevflow_services.launcher import free_port
 from bevflow_services.mqtt.broker import RECONNECT_S
+from tests.e2e.renewals import renew_until
 from tests.services.gateway.feed import SITE_YAML, T0, S, incident, occupancy, over_capacity
 
 pytestmark = pytest.mark.e2e
@@ -28,6 +30,9 @@ TIMEOUT_S = 30.0
 BROKER_DOWN_S = 30.0
 # Back, the broker waits for the service's next try: at most paho's longest reconnect wait.
 BACK_WITHIN_S = RECONNECT_S[1] + TIMEOUT_S
+# Long enough that the alerts of a test about delivery, which nobody renews, do not lapse meanwhile.
+LONG_LEASE_S = 3600.0
+SHORT_LEASE_S = 1.5
 
 
 def mosquitto_binary() -> str:
@@ -98,23 +103,29 @@ class Receiver:
         self.client.loop_stop()
 
 
+def start_service(tmp_path: Path, hub: str, broker: Broker, *options: str) -> subprocess.Popen:
+    site = tmp_path / "site.yaml"
+    site.write_text(SITE_YAML)
+    with (tmp_path / "mqtt.log").open("wb") as log:
+        return subprocess.Popen([sys.executable, "-m", "bevflow_services.cli", "serve", "mqtt", "--site", str(site),
+                                 "--listen", hub, "--broker", f"mqtt://127.0.0.1:{broker.port}",
+                                 "--outbox", str(tmp_path / "outbox.db"), *options],
+                                stdout=log, stderr=subprocess.STDOUT)
+
+
 def test_alerts_raised_while_the_broker_is_down_arrive_once_in_order(tmp_path: Path) -> None:
     broker = Broker(tmp_path)
     broker.start()
-    site = tmp_path / "site.yaml"
-    site.write_text(SITE_YAML)
     hub = f"tcp/127.0.0.1:{free_port()}"
-    with (tmp_path / "mqtt.log").open("wb") as log:
-        service = subprocess.Popen([sys.executable, "-m", "bevflow_services.cli", "serve", "mqtt", "--site", str(site),
-                                    "--listen", hub, "--broker", f"mqtt://127.0.0.1:{broker.port}",
-                                    "--outbox", str(tmp_path / "outbox.db"), "--home-assistant"],
-                                   stdout=log, stderr=subprocess.STDOUT)
+    service = start_service(tmp_path, hub, broker, "--home-assistant", "--alert-lease-s", str(LONG_LEASE_S))
     receiver = Receiver(broker.port)
     session = bus.open_session(bus.BusConfig(connect=(hub,)))
     events = bus.Publication(session, bus.Keys("hall").events, bus.JsonCodec(Event, "Event"))
     occupancy_out = bus.Publication(session, bus.Keys("hall").occupancy, bus.JsonCodec(type(occupancy(T0, 0))))
     try:
-        assert events.wait_for_subscribers(TIMEOUT_S), (tmp_path / "mqtt.log").read_text()
+        # Each subscription is declared in turn: the first occupancy must not go out before its own.
+        assert events.wait_for_subscribers(TIMEOUT_S) and occupancy_out.wait_for_subscribers(TIMEOUT_S), (
+            (tmp_path / "mqtt.log").read_text())
         raised = [incident("i1", T0), over_capacity("c1", T0 + S), incident("i1", T0, end_ns=T0 + 2 * S)]
         for event in raised:
             events.put(event)
@@ -145,6 +156,43 @@ def test_alerts_raised_while_the_broker_is_down_arrive_once_in_order(tmp_path: P
     finally:
         events.close()
         occupancy_out.close()
+        session.close()
+        receiver.close()
+        service.terminate()
+        service.wait(10)
+        broker.stop()
+
+
+def test_an_open_alert_nobody_renews_is_published_again_ended_and_a_renewed_one_is_not(tmp_path: Path) -> None:
+    broker = Broker(tmp_path)
+    broker.start()
+    hub = f"tcp/127.0.0.1:{free_port()}"
+    service = start_service(tmp_path, hub, broker, "--alert-lease-s", str(SHORT_LEASE_S))
+    receiver = Receiver(broker.port)
+    session = bus.open_session(bus.BusConfig(connect=(hub,)))
+    keys = bus.Keys("hall")
+    events = bus.Publication(session, keys.events, bus.JsonCodec(Event, "Event"))
+    renewals = bus.Publication(session, keys.open_alerts, bus.JsonCodec(OpenAlerts))
+
+    def explain() -> str:
+        return f"{receiver.alerts()}\n{(tmp_path / 'mqtt.log').read_text()}"
+
+    try:
+        assert events.wait_for_subscribers(TIMEOUT_S) and renewals.wait_for_subscribers(TIMEOUT_S), (
+            (tmp_path / "mqtt.log").read_text())
+        events.put(incident("forged", T0))
+        events.put(over_capacity("renewed", T0))
+        renew_until(renewals, ["renewed"], lambda: len(receiver.alerts()) >= 3, TIMEOUT_S, explain)
+        quiet_until = time.monotonic() + 2 * SHORT_LEASE_S  # the renewed one outlives another lease or two
+        renew_until(renewals, ["renewed"], lambda: time.monotonic() > quiet_until, TIMEOUT_S, explain)
+        got = [(topic, m["id"], m["active"], m["end_ns"]) for topic, m in receiver.alerts()]
+        assert got[:2] == [("bevflow/hall/alerts/gate/distance_incident", "forged", True, None),
+                           ("bevflow/hall/alerts/gate/over_capacity", "renewed", True, None)]
+        assert [(t, i, a) for t, i, a, _ in got[2:]] == [("bevflow/hall/alerts/gate/distance_incident", "forged", False)]
+        assert got[2][3] > T0  # ended when it arrived, on the service's clock
+    finally:
+        events.close()
+        renewals.close()
         session.close()
         receiver.close()
         service.terminate()

@@ -1,5 +1,6 @@
 """``bevflow serve webhook`` against a local receiver: alerts raised while the receiver is down,
-or while it answers 500, all arrive once it is back, once each, in order, signed."""
+or while it answers 500, all arrive once it is back, once each, in order, signed; an open alert
+nobody renews is POSTed again, ended."""
 
 from __future__ import annotations
 
@@ -15,11 +16,12 @@ from pathlib import Path
 
 import pytest
 
-from bevflow.schemas import Event
+from bevflow.schemas import Event, OpenAlerts
 
 from bevflow_services import bus
 from bevflow_services.launcher import free_port
 from bevflow_services.webhook.main import RETRY_S
+from tests.e2e.renewals import renew_until
 from tests.services.gateway.feed import SITE_YAML, T0, S, incident, over_capacity
 
 pytestmark = pytest.mark.e2e
@@ -28,6 +30,9 @@ SECRET = b"shared-secret"
 RECEIVER_DOWN_S = 30.0
 # Back, the receiver waits for the service's next try: at most its longest wait between tries.
 BACK_WITHIN_S = RETRY_S[1] + TIMEOUT_S
+# Long enough that the alerts of a test about delivery, which nobody renews, do not lapse meanwhile.
+LONG_LEASE_S = 3600.0
+SHORT_LEASE_S = 1.5
 
 
 class Receiver:
@@ -72,18 +77,22 @@ class Receiver:
             return list(self.bodies)
 
 
-def test_alerts_arrive_once_in_order_across_a_receiver_outage(tmp_path: Path) -> None:
-    receiver = Receiver(free_port())
-    receiver.start()
+def start_service(tmp_path: Path, hub: str, receiver: Receiver, *options: str) -> subprocess.Popen:
     site, secret = tmp_path / "site.yaml", tmp_path / "secret"
     site.write_text(SITE_YAML)
     secret.write_bytes(SECRET + b"\n")
-    hub = f"tcp/127.0.0.1:{free_port()}"
     with (tmp_path / "webhook.log").open("wb") as log:
-        service = subprocess.Popen([sys.executable, "-m", "bevflow_services.cli", "serve", "webhook", "--site", str(site),
-                                    "--listen", hub, "--url", f"http://127.0.0.1:{receiver.port}/alerts",
-                                    "--secret-file", str(secret), "--outbox", str(tmp_path / "outbox.db")],
-                                   stdout=log, stderr=subprocess.STDOUT)
+        return subprocess.Popen([sys.executable, "-m", "bevflow_services.cli", "serve", "webhook", "--site", str(site),
+                                 "--listen", hub, "--url", f"http://127.0.0.1:{receiver.port}/alerts",
+                                 "--secret-file", str(secret), "--outbox", str(tmp_path / "outbox.db"), *options],
+                                stdout=log, stderr=subprocess.STDOUT)
+
+
+def test_alerts_arrive_once_in_order_across_a_receiver_outage(tmp_path: Path) -> None:
+    receiver = Receiver(free_port())
+    receiver.start()
+    hub = f"tcp/127.0.0.1:{free_port()}"
+    service = start_service(tmp_path, hub, receiver, "--alert-lease-s", str(LONG_LEASE_S))
     session = bus.open_session(bus.BusConfig(connect=(hub,)))
     events = bus.Publication(session, bus.Keys("hall").events, bus.JsonCodec(Event, "Event"))
     try:
@@ -106,6 +115,41 @@ def test_alerts_arrive_once_in_order_across_a_receiver_outage(tmp_path: Path) ->
         assert "trying alert" in (tmp_path / "webhook.log").read_text()
     finally:
         events.close()
+        session.close()
+        service.terminate()
+        service.wait(10)
+        receiver.stop()
+
+
+def test_an_open_alert_nobody_renews_is_posted_again_ended_and_a_renewed_one_is_not(tmp_path: Path) -> None:
+    receiver = Receiver(free_port())
+    receiver.start()
+    hub = f"tcp/127.0.0.1:{free_port()}"
+    service = start_service(tmp_path, hub, receiver, "--alert-lease-s", str(SHORT_LEASE_S))
+    session = bus.open_session(bus.BusConfig(connect=(hub,)))
+    keys = bus.Keys("hall")
+    events = bus.Publication(session, keys.events, bus.JsonCodec(Event, "Event"))
+    renewals = bus.Publication(session, keys.open_alerts, bus.JsonCodec(OpenAlerts))
+
+    def explain() -> str:
+        return f"{receiver.bodies}\n{(tmp_path / 'webhook.log').read_text()}"
+
+    try:
+        assert events.wait_for_subscribers(TIMEOUT_S) and renewals.wait_for_subscribers(TIMEOUT_S), (
+            (tmp_path / "webhook.log").read_text())
+        events.put(incident("forged", T0))
+        events.put(over_capacity("renewed", T0))
+        renew_until(renewals, ["renewed"], lambda: len(receiver.bodies) >= 3, TIMEOUT_S, explain)
+        quiet_until = time.monotonic() + 2 * SHORT_LEASE_S  # the renewed one outlives another lease or two
+        renew_until(renewals, ["renewed"], lambda: time.monotonic() > quiet_until, TIMEOUT_S, explain)
+        with receiver.lock:
+            got = [(b["id"], b["active"], b["end_ns"]) for b in receiver.bodies]
+        assert got[:2] == [("forged", True, None), ("renewed", True, None)]
+        assert [(i, a) for i, a, _ in got[2:]] == [("forged", False)]
+        assert got[2][2] > T0  # ended when it arrived, on the service's clock
+    finally:
+        events.close()
+        renewals.close()
         session.close()
         service.terminate()
         service.wait(10)

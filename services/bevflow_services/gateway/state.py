@@ -15,7 +15,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from bevflow.alert_lease import MAX_OPEN, RateLimit, lease_over
+from bevflow.alert_lease import OpenAlertLeases, RateLimit
 from bevflow.capture_time import CaptureWindow
 from bevflow.schemas import (
     AlertMessage,
@@ -106,9 +106,8 @@ class GatewayState:
         self._tracks: Tracks | None = None
         self._tracks_received_ns: int | None = None
         self._occupancy: Occupancy | None = None
-        self._active: dict[str, Event] = {}
-        # Gateway clock when each open alert last arrived or was renewed (bevflow.alert_lease).
-        self._renewed: dict[str, int] = {}
+        # The open alerts, each with when it last arrived or was renewed on the gateway's clock.
+        self._leases = OpenAlertLeases()
         self._new_alerts = RateLimit()
         self._services: dict[tuple[str, str], ServiceEntry] = {}
         self.ignored = 0  # messages refused (other site, unknown camera), for /api/health
@@ -171,23 +170,20 @@ class GatewayState:
     def _apply_event(self, event: Event) -> bool:
         now = self.clock()
         with self._lock:
-            if event.id not in self._active and not self._new_alerts.allow(now):
+            if event.id not in self._leases and not self._new_alerts.allow(now):
                 return self._ignore(f"alert {event.id!r}: more new alerts than the bus may bring (a flood)")
-            if event.id not in self._active and event.end_ns is None and len(self._active) >= MAX_OPEN:
-                return self._ignore(f"alert {event.id!r}: {MAX_OPEN} alerts are open already")
+            if not self._leases.room_for(event):
+                return self._ignore(f"alert {event.id!r}: {self._leases.max_open} alerts are open already")
             if isinstance(event, CameraHealthEvent) and not self._cameras.record_event(event):
                 return self._ignore(f"{event.type} for unknown camera {event.camera!r}")
             if isinstance(event, CameraHealthEvent) and event.type == "camera_up":
                 # "up" is a moment, not a condition: it only ends the camera's open "down" alerts.
-                for other in [e for e in self._active.values() if e.type == "camera_down" and e.camera == event.camera]:
-                    del self._active[other.id]
-                    self._renewed.pop(other.id, None)
+                for other in [e for e in self._leases.held() if e.type == "camera_down" and e.camera == event.camera]:
+                    self._leases.closed(other.id)
             elif event.end_ns is None:
-                self._active[event.id] = event
-                self._renewed[event.id] = now
+                self._leases.opened(event, now)
             else:
-                self._active.pop(event.id, None)
-                self._renewed.pop(event.id, None)
+                self._leases.closed(event.id)
         self.history.add_event(event)
         self.alerts.publish(AlertMessage.from_event(event))
         return True
@@ -197,9 +193,7 @@ class GatewayState:
             return self._ignore(f"open alerts for site {renewal.site!r}")
         now = self.clock()
         with self._lock:
-            for alert_id in renewal.ids:
-                if alert_id in self._renewed:
-                    self._renewed[alert_id] = now
+            self._leases.renew(renewal.ids, now)
         return True
 
     def end_lapsed_alerts(self) -> list[Event]:
@@ -208,9 +202,7 @@ class GatewayState:
         clients. Call it now and then on the thread that applies messages; returns what ended."""
         now = self.clock()
         with self._lock:
-            lapsed = [(self._active.pop(i), self._renewed.pop(i)) for i, t in list(self._renewed.items())
-                      if lease_over(t, now)]
-        ended = [e.model_copy(update={"end_ns": max(e.start_ns, renewed)}) for e, renewed in lapsed]
+            ended = self._leases.lapsed(now)
         for event in ended:
             self.history.add_event(event)
             self.alerts.publish(AlertMessage.from_event(event))
@@ -266,7 +258,7 @@ class GatewayState:
         """Alerts that have started and not ended (nor lapsed), oldest first."""
         now = self.clock()
         with self._lock:
-            live = [e for e in self._active.values() if not lease_over(self._renewed[e.id], now)]
+            live = self._leases.live(now)
         return sorted(live, key=lambda e: (e.start_ns, e.id))
 
     def camera_health(self) -> list[CameraHealth]:

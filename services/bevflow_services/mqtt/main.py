@@ -16,7 +16,9 @@ sensors (retained config messages under ``--discovery-prefix``, sent again at ea
 No alert is lost while the broker is down or this service restarts: each is written to the
 outbox (a SQLite file) before it is sent, and sent oldest first, one at a time, until the broker
 acknowledges it. Alerts the service missed while it was down come back from the tracker's cache
-(``bevflow serve tracker --event-cache``).
+(``bevflow serve tracker --event-cache``). What the bus brings is checked as the gateway checks it
+(``bevflow_services.alert_feed``): a flood of new alerts is refused, and an open alert the tracker
+stops renewing is published once more, ended.
 """
 
 from __future__ import annotations
@@ -29,7 +31,8 @@ from typing import Any
 
 from bevflow.schemas import FEED_EVENT_TYPES, EVENT_TYPES, AlertMessage, Event, Occupancy
 
-from bevflow_services import bus
+from bevflow_services import alert_feed, bus
+from bevflow_services.alert_feed import AlertFeed
 from bevflow_services.mqtt.broker import BrokerAddress, Latest, Reliable
 from bevflow_services.mqtt.discovery import discovery_messages
 from bevflow_services.outbox import Outbox, deliver
@@ -56,6 +59,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--types", default=",".join(FEED_EVENT_TYPES), metavar="T,T",
                        help="alert types to publish (default: all but distance_violation, the per-pair events "
                        f"that distance_incident groups; any of {', '.join(EVENT_TYPES)})")
+    alert_feed.add_arguments(group)
 
 
 def alert_topic(prefix: str, site: str, message: AlertMessage) -> str:
@@ -92,26 +96,26 @@ def main(args: argparse.Namespace) -> int:
     reliable = Reliable(address, f"bevflow-{site_id}-alerts")
     latest = Latest(address, f"bevflow-{site_id}-occupancy", on_connect=discovery)
 
-    def on_event(event: Event) -> None:  # on a Zenoh thread
-        if event.type in types:
-            message = AlertMessage.from_event(event)
-            outbox.add(alert_topic(prefix, site_id, message), message.model_dump_json().encode())
+    def forward(event: Event) -> None:
+        message = AlertMessage.from_event(event)
+        outbox.add(alert_topic(prefix, site_id, message), message.model_dump_json().encode())
 
     def on_occupancy(occupancy: Occupancy) -> None:  # on a Zenoh thread
         latest.send(f"{prefix}/{site_id}/occupancy", occupancy.model_dump_json().encode())
         for zone in occupancy.zones:
             latest.send(f"{prefix}/{site_id}/zones/{zone.id}/occupancy", str(zone.count).encode())
 
+    feed = AlertFeed(forward, types, lease_s=args.alert_lease_s)
     session = bus.open_session(bus.config_from_args(args))
     subscriptions: list[bus.Subscription[Any]] = [
-        bus.HistorySubscription(session, keys.events, bus.JsonCodec[Event](Event, "Event"), on_event),
+        *feed.subscribe(session, keys),
         bus.subscribe(session, keys.occupancy, bus.JsonCodec(Occupancy), on_occupancy),
     ]
     token = bus.announce(session, keys, SERVICE)
     print(f"bevflow mqtt: site {site_id!r} to {address.host}:{address.port} under {prefix}/, "
           f"{outbox.backlog()} alerts waiting in {args.outbox}", flush=True)
     try:
-        with stop_on_signals() as stop:
+        with stop_on_signals() as stop, feed.ending_lapsed():
             deliver(outbox, lambda message, stop_: reliable.send(message.topic, message.payload, stop_), stop)
     finally:
         token.undeclare()
@@ -120,7 +124,7 @@ def main(args: argparse.Namespace) -> int:
         session.close()
         reliable.close()
         latest.close()
-        log.info("mqtt stopped; %d alerts still waiting in the outbox", outbox.backlog())
+        log.info("mqtt stopped; %d alerts still waiting in the outbox; alerts %s", outbox.backlog(), dict(feed.counts))
         outbox.close()
     return 0
 

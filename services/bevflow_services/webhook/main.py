@@ -8,7 +8,9 @@ Each alert is the ``/ws/alerts`` message (JSON), POSTed when the alert starts, c
 with ``X-Bevflow-Signature: sha256=HEX``, the HMAC-SHA256 of the body under the shared secret, so
 the receiver can check it came from here. Any answer but 2xx, or none, is retried with backoff
 (1 s doubling up to a minute), the alerts after it waiting, so they arrive once each and in
-order; meanwhile they are kept in the outbox (a SQLite file), across restarts too.
+order; meanwhile they are kept in the outbox (a SQLite file), across restarts too. What the bus
+brings is checked as the gateway checks it (``bevflow_services.alert_feed``): a flood of new
+alerts is refused, and an open alert the tracker stops renewing is POSTed once more, ended.
 """
 
 from __future__ import annotations
@@ -25,7 +27,8 @@ from pathlib import Path
 
 from bevflow.schemas import EVENT_TYPES, FEED_EVENT_TYPES, AlertMessage, Event
 
-from bevflow_services import bus
+from bevflow_services import alert_feed, bus
+from bevflow_services.alert_feed import AlertFeed
 from bevflow_services.outbox import Message, Outbox, deliver
 from bevflow_services.redact import redact
 from bevflow_services.runtime import UserError, service_site, stop_on_signals
@@ -48,6 +51,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--types", default=",".join(FEED_EVENT_TYPES), metavar="T,T",
                        help="alert types to send (default: all but distance_violation, the per-pair events that "
                        f"distance_incident groups; any of {', '.join(EVENT_TYPES)})")
+    alert_feed.add_arguments(group)
 
 
 def signature(secret: bytes, body: bytes) -> str:
@@ -103,23 +107,24 @@ def main(args: argparse.Namespace) -> int:
         raise UserError(f"--types: choose from {', '.join(EVENT_TYPES)}")
     poster, outbox = Poster(args.url, read_secret(args), args.timeout), Outbox(args.outbox)
 
-    def on_event(event: Event) -> None:  # on a Zenoh thread
-        if event.type in types:
-            outbox.add(event.type, AlertMessage.from_event(event).model_dump_json().encode())
+    def forward(event: Event) -> None:
+        outbox.add(event.type, AlertMessage.from_event(event).model_dump_json().encode())
 
+    feed = AlertFeed(forward, types, lease_s=args.alert_lease_s)
     session = bus.open_session(bus.config_from_args(args))
     keys = bus.Keys(site_id)
-    events = bus.HistorySubscription(session, keys.events, bus.JsonCodec[Event](Event, "Event"), on_event)
+    subscriptions = feed.subscribe(session, keys)
     token = bus.announce(session, keys, SERVICE)
     print(f"bevflow webhook: site {site_id!r} to {redact(args.url)}{'' if poster.secret else ' (unsigned)'}, "
           f"{outbox.backlog()} alerts waiting in {args.outbox}", flush=True)
     try:
-        with stop_on_signals() as stop:
+        with stop_on_signals() as stop, feed.ending_lapsed():
             deliver(outbox, poster.send, stop)
     finally:
         token.undeclare()
-        events.close()
+        for subscription in subscriptions:
+            subscription.close()
         session.close()
-        log.info("webhook stopped; %d alerts still waiting in the outbox", outbox.backlog())
+        log.info("webhook stopped; %d alerts still waiting in the outbox; alerts %s", outbox.backlog(), dict(feed.counts))
         outbox.close()
     return 0
