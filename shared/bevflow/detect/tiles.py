@@ -63,8 +63,9 @@ class TileLayout:
 
 class RimTileDetector:
     """``tile_detector``: a ``bevflow.detect.runtime.Detector`` with a fixed square input (e.g.
-    FastestDet). ``centre``: optional detector (with ``detect(image, height, focal)``) for the
-    people right under the camera."""
+    FastestDet), given all of a frame's tiles in one ``detect_batch_scaled`` call. ``centre``:
+    optional detector (with ``detect(image, height, focal)``) for the people right under the
+    camera, run on the middle of the frame only."""
 
     def __init__(self, tile_detector: Detector, layout: TileLayout = TileLayout(), centre: Detector | None = None,
                  centre_share: float = 0.3, field_of_view_deg: float = DEFAULT_FIELD_OF_VIEW_DEG) -> None:  # fmt: skip
@@ -144,8 +145,8 @@ def tile_affine(theta: float, centre: tuple[float, float], radius: float, layout
 RIM_TILES = "rim-tiles"
 """The name that selects this detector wherever a model is named (site file, ``--model``)."""
 TILE_MODEL = Path(__file__).resolve().parent.parent / "data" / "models" / "fastestdet-coco.onnx"
-"""FastestDet's COCO weights (BSD-3-Clause, see the model card): eight tiles cost about what
-YOLOX-nano (``yolox-nano-coco.onnx``, also shipped, more accurate on real frames) costs on one."""
+"""FastestDet's COCO weights (BSD-3-Clause, see the model card): a tile costs about a quarter of
+what YOLOX-nano (``yolox-nano-coco.onnx``, also shipped, more accurate on real frames) costs."""
 CENTRE_MODEL = TILE_MODEL.with_name("bevflow-person-centernet.onnx")
 
 

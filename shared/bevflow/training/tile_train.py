@@ -5,8 +5,11 @@ tile input size (its box sizes are a share of the input, so a smaller input than
 them relearnt). Targets follow FastestDet's own scheme, so its pretrained heads start close: a
 box is claimed by the (up to) four cells whose corner lies within one cell of its centre, the
 better half of them by IoU are positives, their objectness target is that IoU, box loss is
-1 − GIoU, class loss the person's log-probability; cells under boxes marked ignore (people too
-hidden or cut) are left out of the objectness loss.
+1 − GIoU; cells under boxes marked ignore (people too hidden or cut) are left out of the
+objectness loss. The class head and the first layers stay as COCO left them (``FROZEN``).
+
+Measured so far, it does not pay: renders alone lower the real-frame scores (docs/RESULTS.md,
+"Real frames"), so the shipped tile model is FastestDet's COCO weights unchanged.
 
     python -m bevflow.training.tile_train --data TILES --out RUN --steps 3000
 
