@@ -40,6 +40,7 @@ class Timeouts:
 
 DEFAULT_TIMEOUTS = Timeouts()
 
+
 def is_network_stream(source: str) -> bool:
     """An URL other than ``file:`` (RTSP, HTTP, TCP ...): a live stream, not a file."""
     scheme, sep, _ = source.partition("://")
