@@ -34,7 +34,9 @@ FIRST_DAY, LAST_DAY = date(1970, 1, 2), date(2262, 4, 10)
 RESPONSES: dict[int | str, dict[str, Any]] = {200: {
     "content": {"text/html": {"schema": {"type": "string"}},
                 "application/pdf": {"schema": {"type": "string", "format": "binary"}}},
-    "description": "the report as JSON, or as HTML or PDF with format=html or format=pdf"}}
+    "description": "the report as JSON, or as HTML or PDF with format=html or format=pdf"},
+    501: {"description": "format=html or format=pdf on a gateway installed without the 'reports' extra (the detail says "
+          "what to install); JSON still works"}}
 
 
 def time_zone(name: str) -> tzinfo:
