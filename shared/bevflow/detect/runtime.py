@@ -178,8 +178,11 @@ class Detector:
             pad, fill = (0, 0), 0
         else:
             pad, fill = ((tw - sw) // 2, (th - sh) // 2), LETTERBOX_GREY
-        canvas = np.full((th, tw, 3), fill, dtype=np.uint8)
-        canvas[pad[1] : pad[1] + sh, pad[0] : pad[0] + sw] = image
+        if (th, tw) == (sh, sw):  # already the input's size (a rim tile): nothing to pad
+            canvas = image
+        else:
+            canvas = np.full((th, tw, 3), fill, dtype=np.uint8)
+            canvas[pad[1] : pad[1] + sh, pad[0] : pad[0] + sw] = image
         if self.rgb:
             canvas = canvas[..., ::-1]
         tensor = np.ascontiguousarray(canvas.transpose(2, 0, 1)[None], dtype=np.float32)

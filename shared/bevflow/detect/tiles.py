@@ -161,16 +161,22 @@ def load_rim_tiles(threads: int = 2, tile_model: str | Path | None = None, **opt
 
 def rotated_nms(rotated: FloatArray, scores: FloatArray, iou_threshold: float) -> NDArray[np.int64]:
     """Greedy non-maximum suppression by rotated IoU; the indices kept, best score first. Only
-    kept boxes are compared with the rest, so the cost follows the people, not the candidates."""
+    kept boxes are compared with the rest, and only with those whose enclosing boxes overlap
+    theirs, so the cost follows the people who stand close, not the candidates."""
     order = np.argsort(-np.asarray(scores), kind="stable")
     boxes = np.asarray(rotated, np.float64).reshape(-1, 5)[order]
+    e = rotated_to_xyxy(boxes)
+    touch = (
+        (e[:, None, 0] < e[None, :, 2]) & (e[None, :, 0] < e[:, None, 2])
+        & (e[:, None, 1] < e[None, :, 3]) & (e[None, :, 1] < e[:, None, 3])
+    )  # fmt: skip
     alive = np.ones(len(order), dtype=bool)
     keep = []
     for i in range(len(order)):
         if not alive[i]:
             continue
         keep.append(order[i])
-        rest = np.nonzero(alive[i + 1 :])[0] + i + 1
+        rest = np.nonzero(alive[i + 1 :] & touch[i, i + 1 :])[0] + i + 1
         if len(rest):
             alive[rest] &= rotated_iou_matrix(boxes[i], boxes[rest])[0] <= iou_threshold
     return np.asarray(keep, dtype=np.int64)
