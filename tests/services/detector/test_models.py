@@ -175,3 +175,16 @@ def test_the_site_file_names_the_providers(line: str, expected: list[str]) -> No
 def test_an_unknown_provider_is_refused_when_the_site_is_read(line: str) -> None:
     with pytest.raises(SiteError, match="detector_providers.*choose from tensorrt, cuda, openvino, cpu"):
         parse_site(line + SITE % "null")
+
+
+@pytest.mark.parametrize(
+    ("table", "low", "high"),
+    [("[{min_height_m: 0, max_height_m: 5, model: bevflow-person-centernet-low.onnx}, "
+      "{min_height_m: 5, max_height_m: 100, model: bevflow-person-centernet.onnx}]", LOW_CEILING_MODEL.name, DEFAULT_MODEL.name),
+     ("[{min_height_m: 0, max_height_m: 100, model: rim-tiles}]", "rim-tiles", "rim-tiles")],
+)
+def test_a_site_height_table_names_the_render_trained_pair_or_rim_tiles(table: str, low: str, high: str) -> None:
+    """What docs/INSTALL.md ("Which detector model") shows a site file doing."""
+    site = parse_site((SITE % "null") + f"detectors: {table}\n")
+    models = CameraModels(site, load=FakeDetector).models()
+    assert (models["low"], models["high"]) == (low, high)
