@@ -203,3 +203,45 @@ def test_a_rotation_aware_detector_is_told_where_the_nadir_is_in_its_window(scal
     x0, y0, _, _ = scaled_window(worker.windows["a"], scale, w, h)
     # A camera looking straight down: its nadir is the principal point (499.5, 399.5).
     assert fake.centre == pytest.approx(((499.5 + 0.5) * scale - 0.5 - x0, (399.5 + 0.5) * scale - 0.5 - y0), abs=1e-6)
+
+
+def _walker_frame(x: int) -> np.ndarray:
+    """A grey floor with a dark person, 30 x 60 px, at column ``x``."""
+    image = np.full((800, 1000, 3), 110, np.uint8)
+    image[370:430, x : x + 30] = 25
+    return image
+
+
+# (person's column in each frame, ms after the previous frame) → which frames ran the detector.
+@pytest.mark.parametrize(
+    ("steps", "detected"),
+    [([(480, 0), (480, 100), (480, 100), (480, 100)], [True, False, False, False]),  # standing still
+     ([(480, 0), (500, 100), (520, 100), (540, 100)], [True, True, True, True]),  # walking
+     ([(480, 0), (480, 600), (480, 600), (480, 100)], [True, False, True, False]),  # still, but a second old
+     ([(480, 0), (480, 100), (530, 100), (530, 100)], [True, False, True, False])],  # stands, steps, stands
+)
+def test_with_skip_still_a_camera_whose_picture_is_unchanged_reuses_its_last_boxes(
+        steps: list[tuple[int, int]], detected: list[bool]) -> None:  # fmt: skip
+    from bevflow.detect.still import StillFrames
+
+    fake = FakeDetector()
+    worker = FrameDetector(SITE, {"a": fake}, whole_frame=True, still=StillFrames())
+    t, ran, messages = 0, [], []
+    for seq, (x, after_ms) in enumerate(steps):
+        t += after_ms * 1_000_000
+        calls = len(fake.calls)
+        frame_header = FrameHeader(camera="a", seq=seq, capture_ns=t, width=1000, height=800)
+        messages.append(worker.detect(frame_header, _walker_frame(x)))
+        ran.append(len(fake.calls) > calls)
+    assert ran == detected
+    assert [(m.seq, m.capture_ns) for m in messages] == [(k, sum(s[1] for s in steps[: k + 1]) * 1_000_000) for k in range(len(steps))]
+    assert all(m.model_dump(exclude={"seq", "capture_ns"}) == messages[0].model_dump(exclude={"seq", "capture_ns"}) for m in messages)
+    assert sum(worker.reused.values()) == detected.count(False)
+
+
+def test_without_skip_still_every_frame_is_detected() -> None:
+    fake = FakeDetector()
+    worker = FrameDetector(SITE, {"a": fake}, whole_frame=True)
+    for seq in range(3):
+        worker.detect(FrameHeader(camera="a", seq=seq, capture_ns=seq * 100_000_000, width=1000, height=800), _walker_frame(480))
+    assert len(fake.calls) == 3 and not worker.reused
