@@ -25,6 +25,7 @@ from bevflow.alert_lease import LEASE_S, OpenAlertLeases, RateLimit
 from bevflow.schemas import Event, OpenAlerts
 
 from bevflow_services import bus
+from bevflow_services.runtime import periodically
 
 log = logging.getLogger(__name__)
 
@@ -114,18 +115,5 @@ class AlertFeed:
     @contextmanager
     def ending_lapsed(self, every_s: float = LAPSE_CHECK_S) -> Iterator[None]:
         """While the block runs, ``end_lapsed`` every ``every_s`` seconds on a thread of its own."""
-        stop = threading.Event()
-        thread = threading.Thread(target=self._end_lapsed_until, args=(stop, every_s), name="alert-leases", daemon=True)
-        thread.start()
-        try:
+        with periodically(every_s, self.end_lapsed, "alert-leases"):
             yield
-        finally:
-            stop.set()
-            thread.join()
-
-    def _end_lapsed_until(self, stop: threading.Event, every_s: float) -> None:
-        while not stop.wait(every_s):
-            try:
-                self.end_lapsed()
-            except Exception:  # the next check tries again
-                log.exception("could not forward the lapsed alerts")

@@ -1,19 +1,45 @@
 """What every service shares at run time, whichever command starts it: the site it runs for, the
-signals that stop it, and the error a user can fix."""
+signals that stop it, work it repeats on a thread of its own, and the error a user can fix."""
 
 from __future__ import annotations
 
 import argparse
+import logging
 import signal
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
 from bevflow.site import Site, SiteError, load_site_or_builtin
 
+log = logging.getLogger(__name__)
+
 
 class UserError(Exception):
     """Something the user can fix (a bad path, file or option). Printed as one line, no traceback."""
+
+
+@contextmanager
+def periodically(every_s: float, action: Callable[[], object], name: str) -> Iterator[None]:
+    """Call ``action`` every ``every_s`` seconds on a thread named ``name`` while the block runs.
+    An exception is logged and the next call tries again: repeated chores (reporting metrics,
+    ending lapsed alerts) must never stop the service they serve."""
+    stop = threading.Event()
+
+    def loop() -> None:
+        while not stop.wait(every_s):
+            try:
+                action()
+            except Exception:
+                log.exception("%s failed; trying again in %g s", name, every_s)
+
+    thread = threading.Thread(target=loop, name=name, daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        thread.join()
 
 
 @contextmanager

@@ -23,6 +23,7 @@ from typing import Any, Literal
 from bevflow.schemas import HistogramSeries, MetricSeries, ServiceMetrics
 
 from bevflow_services import bus
+from bevflow_services.runtime import periodically
 
 log = logging.getLogger(__name__)
 
@@ -138,24 +139,16 @@ def reporting(session: Any, site: str, service: str, book: MetricsBook,
     """Publish ``book`` every ``every_s`` seconds (and once more at the end) while the block runs."""
     keys, instance = bus.Keys(site), bus.default_instance_id()
     publication = bus.Publication(session, keys.metrics(service, instance), bus.JsonCodec(ServiceMetrics))
-    stop = threading.Event()
 
     def publish() -> None:
+        publication.put(book.message(site, service, instance, clock()))
+
+    try:
+        with periodically(every_s, publish, f"{service}-metrics"):
+            yield
+    finally:
         try:
-            publication.put(book.message(site, service, instance, clock()))
+            publish()
         except Exception:  # measurements must never stop the service they measure
             log.exception("could not publish %s metrics", service)
-
-    def loop() -> None:
-        while not stop.wait(every_s):
-            publish()
-
-    thread = threading.Thread(target=loop, name=f"{service}-metrics", daemon=True)
-    thread.start()
-    try:
-        yield
-    finally:
-        stop.set()
-        thread.join()
-        publish()
         publication.close()
