@@ -145,7 +145,7 @@ def tile_affine(theta: float, centre: tuple[float, float], radius: float, layout
 RIM_TILES = "rim-tiles"
 """The name that selects this detector wherever a model is named (site file, ``--model``)."""
 TILE_MODEL = Path(__file__).resolve().parent.parent / "data" / "models" / "fastestdet-coco.onnx"
-"""FastestDet's COCO weights (BSD-3-Clause, see the model card): a tile costs about a quarter of
+"""FastestDet's COCO weights (BSD-3-Clause, see the model card): a tile costs a third to a quarter of
 what YOLOX-nano (``yolox-nano-coco.onnx``, also shipped, more accurate on real frames) costs."""
 CENTRE_MODEL = TILE_MODEL.with_name("bevflow-person-centernet.onnx")
 
