@@ -14,6 +14,12 @@ from bevflow.site import Site, SiteError, load_site_or_builtin
 
 log = logging.getLogger(__name__)
 
+# A camera silent this long is down, for the tracker's camera_down alert and the gateway's camera
+# health alike: a lost stream is then reported within 5 s of its last frame, with margin for the
+# last frames still on their way. Cameras send 2-10 frames a second, so a few lost or late ones
+# do not reach it.
+CAMERA_SILENCE_S = 4.0
+
 
 class UserError(Exception):
     """Something the user can fix (a bad path, file or option). Printed as one line, no traceback."""

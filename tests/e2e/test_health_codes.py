@@ -22,7 +22,7 @@ pytestmark = [pytest.mark.e2e, pytest.mark.slow]
 
 SITE = "demo-hall"
 STOPPED = "hall-1"
-DOWN_WITHIN_S = 10.0  # the gateway's camera timeout is 5 s
+DOWN_WITHIN_S = 10.0  # the gateway's camera timeout is 4 s (CAMERA_SILENCE_S)
 # The tracker reports a camera up after --camera-up-after seconds of steady reports.
 UP_AFTER_S = 3.0
 

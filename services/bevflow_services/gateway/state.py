@@ -36,6 +36,7 @@ from bevflow_services.gateway.camera_health import CameraHealth, CameraHealthBoo
 from bevflow_services.gateway.degraded import DataQuality, DegradedPeriod
 from bevflow_services.gateway.fanout import Broadcaster
 from bevflow_services.gateway.history import HistoryStore, InMemoryHistory
+from bevflow_services.runtime import CAMERA_SILENCE_S
 
 log = logging.getLogger(__name__)
 
@@ -85,7 +86,7 @@ class GatewayState:
         *,
         site_id: str | None = None,
         clock: Callable[[], int] = time.time_ns,
-        camera_timeout_s: float = 5.0,
+        camera_timeout_s: float = CAMERA_SILENCE_S,
         alert_queue: int = 256,
         tracks_queue: int = 4,
         window: CaptureWindow | None = None,

@@ -32,7 +32,7 @@ from bevflow.schemas import CameraCylinders, CameraHealthEvent, Event, Occupancy
 from bevflow.units import NS_PER_S
 
 from bevflow_services import bus
-from bevflow_services.runtime import UserError, service_site, stop_on_signals
+from bevflow_services.runtime import CAMERA_SILENCE_S, UserError, service_site, stop_on_signals
 from bevflow_services.service_metrics import MetricsBook, reporting
 from bevflow_services.tracker.ticks import TickHandler
 from bevflow_services.tracker.track_ids import TrackIdError, TrackIdReservation
@@ -47,8 +47,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        help="length of one tracking tick; match the cameras' frame interval (default 100 = 10 fps)")
     group.add_argument("--max-wait-ms", type=float, default=150.0,
                        help="how long a tick waits for a late camera before it goes without it (default 150)")
-    group.add_argument("--camera-timeout", type=float, default=5.0,
-                       help="seconds of silence after which a camera is reported down (default 5)")
+    group.add_argument("--camera-timeout", type=float, default=CAMERA_SILENCE_S,
+                       help=f"seconds of silence after which a camera is reported down (default {CAMERA_SILENCE_S:g})")
     group.add_argument("--camera-up-after", type=float, default=10.0,
                        help="seconds a camera reported down must report steadily before it counts as up again (default 10)")
     group.add_argument("--event-cache", type=int, default=10000,
