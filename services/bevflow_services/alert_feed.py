@@ -25,7 +25,9 @@ from bevflow.alert_lease import LEASE_S, OpenAlertLeases, RateLimit
 from bevflow.schemas import Event, OpenAlerts
 
 from bevflow_services import bus
+from bevflow_services.outbox import Outbox
 from bevflow_services.runtime import periodically
+from bevflow_services.service_metrics import REPORT_EVERY_S, MetricsBook, reporting
 
 log = logging.getLogger(__name__)
 
@@ -60,6 +62,7 @@ class AlertFeed:
         self.types = frozenset(types)
         self.clock = clock
         self.counts: Counter[str] = Counter()
+        self.book = MetricsBook()  # the same counts for /metrics (``running``)
         self._leases = OpenAlertLeases(lease_s)
         self._rate = RateLimit()
         self._lock = threading.Lock()
@@ -81,7 +84,7 @@ class AlertFeed:
             else:
                 self._leases.closed(event.id)
             self.forward(event)
-            self.counts["forwarded"] += 1
+            self._tally("forwarded")
 
     def on_open_alerts(self, renewal: OpenAlerts) -> None:
         with self._lock:
@@ -93,13 +96,17 @@ class AlertFeed:
             ended = self._leases.lapsed(self.clock())
             for event in ended:
                 self.forward(event)
-                self.counts["lapsed"] += 1
+                self._tally("lapsed")
         if ended:
             log.warning("%d open alerts ended by themselves: no renewal from the tracker for their lease", len(ended))
         return ended
 
+    def _tally(self, outcome: str) -> None:
+        self.counts[outcome] += 1
+        self.book.count("alert_feed_alerts", outcome=outcome)
+
     def _refuse(self, why: str) -> None:
-        self.counts["refused"] += 1
+        self._tally("refused")
         now = time.monotonic()
         if now - self._last_refusal_log >= REFUSAL_LOG_EVERY_S:
             self._last_refusal_log = now
@@ -111,6 +118,19 @@ class AlertFeed:
             bus.HistorySubscription(session, keys.events, bus.JsonCodec[Event](Event, "Event"), self.on_event),
             bus.subscribe(session, keys.open_alerts, bus.JsonCodec(OpenAlerts), self.on_open_alerts),
         ]
+
+    @contextmanager
+    def running(self, session: Any, site_id: str, service: str, outbox: Outbox) -> Iterator[None]:
+        """While the block runs: lapsed alerts are ended, and this feed's counts and ``outbox``'s
+        backlog (what the receiver has not acknowledged yet) go to the gateway's ``/metrics``."""
+
+        def backlog() -> None:
+            self.book.set("outbox_backlog_alerts", outbox.backlog())
+
+        backlog()
+        with self.ending_lapsed(), periodically(REPORT_EVERY_S, backlog, f"{service}-backlog"), \
+                reporting(session, site_id, service, self.book):  # fmt: skip
+            yield
 
     @contextmanager
     def ending_lapsed(self, every_s: float = LAPSE_CHECK_S) -> Iterator[None]:

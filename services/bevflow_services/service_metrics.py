@@ -48,6 +48,10 @@ SERIES: dict[str, SeriesInfo] = {
     "tick_duration_seconds": SeriesInfo("histogram", "the tracker's time to fuse, track and analyse one tick"),
     "history_write_seconds": SeriesInfo("histogram", "the recorder's time to write one batch to the history database"),
     "history_backlog_rows": SeriesInfo("gauge", "rows the recorder holds that are not in the history database yet"),
+    "alert_feed_alerts": SeriesInfo("counter", "alerts an MQTT or webhook service took from the bus, by outcome: "
+                                    "forwarded, refused (beyond the flood limit) or lapsed (forwarded ended, unrenewed)"),
+    "outbox_backlog_alerts": SeriesInfo("gauge", "alerts an MQTT or webhook service holds that its receiver has not "
+                                        "acknowledged yet (they go out, in order, once it answers)"),
     "detector_frames_reused": SeriesInfo("counter", "frames of each camera that showed nothing new, whose last boxes "
                                          "the detector sent again without running (bevflow serve detector --skip-still)"),
     "detector_model_info": SeriesInfo("gauge", "1 for each camera the detector serves, labelled with its model and the "

@@ -87,6 +87,11 @@ def test_a_flood_beyond_the_burst_is_refused_counted_and_logged_now_and_then(
     feed.on_event(over_capacity("real", T0))  # the bucket refills at its rate
     assert [e.id for e in forwarded[-2:]] == ["forged-0", "real"]
     assert feed.counts == {"forwarded": BURST + 2, "refused": flood - BURST}
+    clock.advance(LEASE_S + 1.0)
+    assert len(feed.end_lapsed()) == BURST  # the forged ones still open, "real" too
+    reported = {v.labels["outcome"]: v.value for v in feed.book.message("hall", "mqtt", "m1", clock()).values
+                if v.name == "alert_feed_alerts"}
+    assert reported == {"forwarded": BURST + 2, "refused": flood - BURST, "lapsed": BURST}  # what /metrics will serve
 
 
 def test_alerts_of_other_types_are_not_forwarded_held_or_counted(feed: AlertFeed, clock: FakeClock,

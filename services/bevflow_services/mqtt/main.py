@@ -115,7 +115,7 @@ def main(args: argparse.Namespace) -> int:
     print(f"bevflow mqtt: site {site_id!r} to {address.host}:{address.port} under {prefix}/, "
           f"{outbox.backlog()} alerts waiting in {args.outbox}", flush=True)
     try:
-        with stop_on_signals() as stop, feed.ending_lapsed():
+        with stop_on_signals() as stop, feed.running(session, site_id, SERVICE, outbox):
             deliver(outbox, lambda message, stop_: reliable.send(message.topic, message.payload, stop_), stop)
     finally:
         token.undeclare()

@@ -118,7 +118,7 @@ def main(args: argparse.Namespace) -> int:
     print(f"bevflow webhook: site {site_id!r} to {redact(args.url)}{'' if poster.secret else ' (unsigned)'}, "
           f"{outbox.backlog()} alerts waiting in {args.outbox}", flush=True)
     try:
-        with stop_on_signals() as stop, feed.ending_lapsed():
+        with stop_on_signals() as stop, feed.running(session, site_id, SERVICE, outbox):
             deliver(outbox, poster.send, stop)
     finally:
         token.undeclare()

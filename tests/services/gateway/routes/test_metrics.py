@@ -130,6 +130,8 @@ REQUIRED = [
     ("websocket clients", "bevflow_websocket_clients", {"stream": "alerts"}),
     ("history write latency", "bevflow_history_write_seconds_count", {"instance": "r1"}),
     ("history backlog", "bevflow_history_backlog_rows", {"instance": "r1"}),
+    ("alerts refused by a forwarder", "bevflow_alert_feed_alerts_total", {"instance": "m1", "outcome": "refused"}),
+    ("a forwarder's outbox backlog", "bevflow_outbox_backlog_alerts", {"instance": "m1"}),
 ]
 
 
@@ -137,14 +139,17 @@ def _fed_gateway(client: TestClient, state: GatewayState, clock: FakeClock) -> N
     """The state fed as in a running site, and one report from each service that measures itself."""
     state.apply(frame("north", 1, T0))
     state.apply(incident("i1", T0).model_copy(update={"raised_ns": T0}))
-    detector, tracker, recorder = MetricsBook(), MetricsBook(), MetricsBook()
+    detector, tracker, recorder, mqtt = MetricsBook(), MetricsBook(), MetricsBook(), MetricsBook()
+    mqtt.count("alert_feed_alerts", 3, outcome="refused")
+    mqtt.set("outbox_backlog_alerts", 7)
     detector.observe("detector_latency_seconds", 0.08)
     tracker.count("camera_frames_late", camera="south")
     tracker.observe("tick_duration_seconds", 0.004)
     recorder.observe("history_write_seconds", 0.002)
     recorder.set("history_backlog_rows", 12)
     store = client.app.state.service_metrics  # type: ignore[attr-defined]
-    for service, instance, book in (("detector", "d1", detector), ("tracker", "t1", tracker), ("recorder", "r1", recorder)):
+    for service, instance, book in (("detector", "d1", detector), ("tracker", "t1", tracker), ("recorder", "r1", recorder),
+                                    ("mqtt", "m1", mqtt)):
         store.put(_report(service, instance, book, clock()))
 
 
