@@ -117,19 +117,22 @@ class CameraModels:
 
     def providers(self) -> list[str]:
         """The execution providers the loaded models run on (the first of each), for the start-up log."""
-        sessions = [d.tile_detector if isinstance(d, RimTileDetector) else d for d in self.detectors.values()]
-        return sorted({p[0] for d in sessions if (p := getattr(d, "providers", None))})
+        return sorted({p for p in map(_provider, self.detectors.values()) if p is not None})
 
     def runs_on(self) -> dict[str, tuple[str, str]]:
-        """Each camera's model name and the execution provider it runs on (its tile model's, for
-        rim-tiles), for the start-up log and ``/api/health``."""
-        out = {}
-        for camera, detector in self.detectors.items():
-            session = detector.tile_detector if isinstance(detector, RimTileDetector) else detector
-            providers = getattr(session, "providers", None) or ["unknown"]
-            out[camera] = (self.models()[camera][:LABEL_MAX], str(providers[0])[:LABEL_MAX])
-        return out
+        """Each camera's model name and the execution provider it runs on, for ``/api/health``
+        and ``/metrics``."""
+        models = self.models()
+        return {c: (models[c][:LABEL_MAX], (_provider(d) or "unknown")[:LABEL_MAX]) for c, d in self.detectors.items()}
 
     def models(self) -> dict[str, str]:
         """The model file of each camera, for the start-up log."""
         return {c: RIM_TILES if isinstance(d, RimTileDetector) else d.model_path.name for c, d in self.detectors.items()}
+
+
+def _provider(detector: Detector | RimTileDetector) -> str | None:
+    """The execution provider a camera's model runs on (the tile model's, for rim tiles); None
+    for a stand-in that does not say."""
+    session = detector.tile_detector if isinstance(detector, RimTileDetector) else detector
+    providers = getattr(session, "providers", None)
+    return str(providers[0]) if providers else None
