@@ -3,7 +3,10 @@
 ``Detector.detect`` is timed whole (resize to the height-adaptive scale, inference, decoding, NMS)
 with the model that serves each height (``DEFAULT_RANGES``, unless a model is given) on a
 rendered frame of each height (``bevflow.detect.benchmark.rendered_frame``: a crowd drawn
-at 1.5 x the detector's scale, as a camera's own frame is larger than the model's input). Without
+at 1.5 x the detector's scale, as a camera's own frame is larger than the model's input). The
+rim tiles are timed on that frame enlarged to ``REAL_FRAME_PX`` square, the size of the real
+ceiling cameras they serve: the rendered frame itself is too coarse for them and would time
+their coarse-frame model (``bevflow.detect.tiles``, "Coarse frames"). Without
 a model file (none given and none shipped) or without ONNX Runtime, nothing is timed and the
 result says why: no number is made up.
 
@@ -24,6 +27,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+import cv2
 import numpy as np
 
 from bevflow.camera import FisheyeCamera
@@ -37,6 +41,7 @@ if TYPE_CHECKING:  # the detector's module is loaded only when a model is timed
 
 HEIGHTS_M = (3.3, 5.5, 8.1)
 THREADS = (1, 2)
+REAL_FRAME_PX = 2048  # a real ceiling fisheye camera's frame side (the real frames in docs/RESULTS.md)
 
 
 def default_model() -> Path:
@@ -95,9 +100,10 @@ def bench_detector(
 
     rows = []
     for height in heights_m:
-        frame, focal = frame_for(height)
+        rendered = frame_for(height)
         for n in threads:
             detector = make_detector(n, height)
+            frame, focal = camera_sized(detector, *rendered)
             for _ in range(warmup):
                 detector.detect(frame, height, focal)
             timing = time_calls(functools.partial(detector.detect, frame, height, focal), repeats)
@@ -111,6 +117,17 @@ def bench_detector(
                 "boxes": len(timing.result),  # type: ignore[arg-type]
             })
     return {"available": True, "reason": None, "rows": rows}
+
+
+def camera_sized(detector: Detector | RimTileDetector, frame: np.ndarray, focal: float) -> tuple[np.ndarray, float]:
+    """``frame`` and its focal length, enlarged to ``REAL_FRAME_PX`` for the rim tiles when it is
+    too coarse for them (module docstring)."""
+    from bevflow.detect.tiles import RimTileDetector
+
+    if not isinstance(detector, RimTileDetector) or not detector.too_coarse(focal):
+        return frame, focal
+    k = REAL_FRAME_PX / frame.shape[1]
+    return cv2.resize(frame, None, fx=k, fy=k, interpolation=cv2.INTER_LINEAR), focal * k
 
 
 def model_input(detector: Detector | RimTileDetector, frame: np.ndarray, height: float, focal: float) -> str:

@@ -31,6 +31,7 @@ from bevflow.detect.runtime import (
     DetectorBank,
     DetectorError,
     DetectorOptions,
+    LOW_CEILING_MODEL,
     HeightRange,
 )
 from bevflow.detect.tiles import CENTRE_MODEL, RIM_TILES, TILE_MODEL, RimTileDetector
@@ -90,7 +91,8 @@ class CameraModels:
         def named(name: str | Path) -> Detector | RimTileDetector:
             if str(name) == RIM_TILES:
                 if not tiles:
-                    tiles.append(RimTileDetector(load(TILE_MODEL, threads, **options), centre=model(CENTRE_MODEL)))
+                    tiles.append(RimTileDetector(load(TILE_MODEL, threads, **options), centre=model(CENTRE_MODEL),
+                                                coarse=model(LOW_CEILING_MODEL)))
                 return tiles[0]
             return model(name)
 

@@ -21,7 +21,15 @@ boxes outside it.
 The layout (8 tiles of 0.8 × the radius from 0.1 × the radius out) suits ceilings of about 3 m,
 where people are large in the frame; ``load_rim_tiles`` builds the detector with the shipped
 FastestDet (COCO, BSD-3-Clause: see the model card) on the tiles and the shipped render-trained
-model within 0.3 × the radius. It serves cameras under 5 m by default
+model within 0.3 × the radius.
+
+**Coarse frames.** A frame whose image circle is small (under about 290 px of radius for a 190°
+lens) would have its tiles enlarged more than ``MAX_TILE_ENLARGEMENT`` times: people there are a
+few tens of pixels across, blurred further by the enlargement, and the photograph-trained tile
+model misses them (our renders at 3–5 m, drawn at the render-trained models' scale: AP50 0.599).
+Such a frame goes whole through ``coarse`` instead, the render-trained low-ceiling model, which
+was trained on people that size (0.894 on the same renders). Real ceiling cameras from 1280 × 720
+up have larger circles and keep the tiles. It serves cameras under 5 m by default
 (``bevflow.detect.runtime.DEFAULT_RANGES``): on real frames it finds most people, where the
 render-trained models find few (docs/RESULTS.md, "Real frames").
 """
@@ -47,6 +55,7 @@ if TYPE_CHECKING:  # loaded only when a model loads, as in load_rim_tiles
 
 FloatArray = NDArray[np.float64]
 EDGE_PX = 2.0  # a box this close to a tile's side edge is cut by it
+MAX_TILE_ENLARGEMENT = 1.5  # a frame whose tiles would be enlarged more goes to the coarse-frame model
 CENTRE_MARGIN_SHARE = 0.25  # of the radius: how far a person kept by the centre model may reach out
 
 
@@ -65,14 +74,16 @@ class RimTileDetector:
     """``tile_detector``: a ``bevflow.detect.runtime.Detector`` with a fixed square input (e.g.
     FastestDet), given all of a frame's tiles in one ``detect_batch_scaled`` call. ``centre``:
     optional detector (with ``detect(image, height, focal)``) for the people right under the
-    camera, run on the middle of the frame only."""
+    camera, run on the middle of the frame only. ``coarse``: optional detector for whole frames
+    too coarse for the tiles (module docstring, "Coarse frames")."""
 
     def __init__(self, tile_detector: Detector, layout: TileLayout = TileLayout(), centre: Detector | None = None,
-                 centre_share: float = 0.3, field_of_view_deg: float = DEFAULT_FIELD_OF_VIEW_DEG) -> None:  # fmt: skip
+                 centre_share: float = 0.3, field_of_view_deg: float = DEFAULT_FIELD_OF_VIEW_DEG,
+                 coarse: Detector | None = None) -> None:  # fmt: skip
         hw = getattr(tile_detector, "fixed_hw", None)
         if hw is None or hw[0] != hw[1]:
             raise ValueError("the tile detector needs a fixed square input")
-        self.tile_detector, self.layout, self.centre = tile_detector, layout, centre
+        self.tile_detector, self.layout, self.centre, self.coarse = tile_detector, layout, centre, coarse
         self.centre_share, self.half_view = centre_share, math.radians(field_of_view_deg / 2)
         self.input_px = int(hw[0])
 
@@ -81,6 +92,8 @@ class RimTileDetector:
         """Person boxes as the pipeline takes them: each rotated box's enclosing rectangle.
         ``centre``: the point people lie radially about (the camera's nadir in the image);
         default the middle of ``image_bgr``."""
+        if self.coarse is not None and self.too_coarse(focal_px):  # its own boxes, not their radial enclosure
+            return self.coarse.detect(image_bgr, camera_height_m, focal_px)
         h, w = image_bgr.shape[:2]
         rotated, conf = self.detect_rotated(image_bgr, camera_height_m, focal_px, centre or ((w - 1) / 2, (h - 1) / 2))
         return Boxes(rotated_to_xyxy(rotated), conf)
@@ -90,26 +103,42 @@ class RimTileDetector:
         """Rotated boxes (N, 5) and their scores; ``centre`` is the image circle's centre and its
         radius is ``focal_px`` times the lens's half view."""
         radius = focal_px * self.half_view
-        rotated, conf = self._tiles(image_bgr, centre, radius)
+        if self.coarse is not None and self.too_coarse(focal_px):
+            boxes = self.coarse.detect(image_bgr, camera_height_m, focal_px)
+            return radial_boxes(boxes.xyxy, centre), boxes.confidence
+        k = self.tile_enlargement(radius)
+        small = shrunk(image_bgr, k) if k < 1 else image_bgr  # each tile is then only turned, not shrunk
+        k_small = small.shape[1] / image_bgr.shape[1]
+        rotated, conf = self._tiles(small, k_small, centre, radius)
         if self.centre is not None:
             inner = np.hypot(rotated[:, 0] - centre[0], rotated[:, 1] - centre[1]) >= self.centre_share * radius
             # Only the middle of the frame: a person kept there reaches at most a few tenths of
-            # the radius beyond ``centre_share``.
-            half = int(math.ceil((self.centre_share + CENTRE_MARGIN_SHARE) * radius))
-            x0, y0 = max(0, int(centre[0]) - half), max(0, int(centre[1]) - half)
-            crop = np.ascontiguousarray(image_bgr[y0 : int(centre[1]) + half + 1, x0 : int(centre[0]) + half + 1])
-            boxes = self.centre.detect(crop, camera_height_m, focal_px)
-            mid = radial_boxes(boxes.xyxy + [x0, y0, x0, y0], centre)
+            # the radius beyond ``centre_share``. The shrunk frame serves: under 5 m the centre
+            # model's scale is below the tiles'.
+            half = int(math.ceil((self.centre_share + CENTRE_MARGIN_SHARE) * radius * k_small))
+            cx, cy = int(centre[0] * k_small), int(centre[1] * k_small)
+            x0, y0 = max(0, cx - half), max(0, cy - half)
+            crop = np.ascontiguousarray(small[y0 : cy + half + 1, x0 : cx + half + 1])
+            boxes = self.centre.detect(crop, camera_height_m, focal_px * k_small)
+            mid = radial_boxes((boxes.xyxy + [x0, y0, x0, y0]) / k_small, centre)
             near = np.hypot(mid[:, 0] - centre[0], mid[:, 1] - centre[1]) < self.centre_share * radius
             rotated, conf = np.concatenate([rotated[inner], mid[near]]), np.concatenate([conf[inner], boxes.confidence[near]])
         return rotated, conf
 
-    def _tiles(self, image: NDArray[np.uint8], centre: tuple[float, float], radius: float) -> tuple[FloatArray, FloatArray]:
+    def tile_enlargement(self, radius: float) -> float:
+        """How many times a frame's pixels are enlarged into the tiles, for an image circle of
+        ``radius`` px (below 1: shrunk)."""
+        return self.input_px / (self.layout.side_share * radius)
+
+    def too_coarse(self, focal_px: float) -> bool:
+        """Whether a frame of this focal length goes to ``coarse`` (when given) instead of the tiles."""
+        return self.tile_enlargement(focal_px * self.half_view) > MAX_TILE_ENLARGEMENT
+
+    def _tiles(self, small: NDArray[np.uint8], k_small: float, centre: tuple[float, float],
+               radius: float) -> tuple[FloatArray, FloatArray]:  # fmt: skip
+        """The tiles' rotated boxes in frame pixels; ``small`` is the frame shrunk ``k_small`` times."""
         lay, n = self.layout, self.input_px
-        k = n / (lay.side_share * radius)
-        # Shrink the frame once (area-averaged); each tile is then only turned, not shrunk.
-        small = cv2.resize(image, None, fx=k, fy=k, interpolation=cv2.INTER_AREA) if k < 1 else image
-        k_small = small.shape[1] / image.shape[1]
+        k = self.tile_enlargement(radius)
         c = ((centre[0] + 0.5) * k_small - 0.5, (centre[1] + 0.5) * k_small - 0.5)
         angles = [2 * math.pi * t / lay.tiles for t in range(lay.tiles)]
         maps = [tile_affine(theta, c, radius * k_small, lay, n) for theta in angles]
@@ -128,6 +157,16 @@ class RimTileDetector:
         rotated, conf = np.concatenate(found), np.concatenate(scores)
         keep = rotated_nms(rotated, conf, lay.nms_iou)
         return rotated[keep], conf[keep]
+
+
+def shrunk(image: NDArray[np.uint8], k: float) -> NDArray[np.uint8]:
+    """``image`` area-averaged to ``k`` times its size (``k`` < 1), halved first where it can be:
+    halving is OpenCV's fast path, and a 2048 px frame goes to 0.43 × in 5 ms that way against
+    10 ms in one step."""
+    while k <= 0.5 and min(image.shape[:2]) >= 2:
+        image = np.asarray(cv2.resize(image, (image.shape[1] // 2, image.shape[0] // 2), interpolation=cv2.INTER_AREA), dtype=np.uint8)
+        k *= 2
+    return np.asarray(cv2.resize(image, None, fx=k, fy=k, interpolation=cv2.INTER_AREA), dtype=np.uint8) if k < 1 else image
 
 
 def tile_affine(theta: float, centre: tuple[float, float], radius: float, layout: TileLayout,
@@ -151,12 +190,14 @@ CENTRE_MODEL = TILE_MODEL.with_name("bevflow-person-centernet.onnx")
 
 
 def load_rim_tiles(threads: int = 2, tile_model: str | Path | None = None, **options: Unpack[DetectorOptions]) -> RimTileDetector:
-    """The rim-tile detector with the shipped tile model (or ``tile_model``) on every tile and
-    the shipped general model for the people right under the camera; ``options`` go to both."""
-    from bevflow.detect.runtime import Detector  # onnxruntime is imported only when a model loads
+    """The rim-tile detector with the shipped tile model (or ``tile_model``) on every tile, the
+    shipped general model for the people right under the camera and the shipped low-ceiling model
+    for frames too coarse for the tiles; ``options`` go to all three."""
+    from bevflow.detect.runtime import LOW_CEILING_MODEL, Detector  # onnxruntime is imported only when a model loads
 
     tiles = Detector(tile_model or TILE_MODEL, threads=threads, **options)
-    return RimTileDetector(tiles, centre=Detector(CENTRE_MODEL, threads=threads, **options))
+    return RimTileDetector(tiles, centre=Detector(CENTRE_MODEL, threads=threads, **options),
+                           coarse=Detector(LOW_CEILING_MODEL, threads=threads, **options))
 
 
 def rotated_nms(rotated: FloatArray, scores: FloatArray, iou_threshold: float) -> NDArray[np.int64]:
