@@ -31,10 +31,9 @@ from bevflow.detect.runtime import (
     DetectorBank,
     DetectorError,
     DetectorOptions,
-    LOW_CEILING_MODEL,
     HeightRange,
 )
-from bevflow.detect.tiles import CENTRE_MODEL, RIM_TILES, TILE_MODEL, RimTileDetector
+from bevflow.detect.tiles import RIM_TILES, RimTileDetector, rim_tiles
 from bevflow.site import Site
 
 SHIPPED_MODELS = DEFAULT_MODEL.parent
@@ -91,8 +90,7 @@ class CameraModels:
         def named(name: str | Path) -> Detector | RimTileDetector:
             if str(name) == RIM_TILES:
                 if not tiles:
-                    tiles.append(RimTileDetector(load(TILE_MODEL, threads, **options), centre=model(CENTRE_MODEL),
-                                                coarse=model(LOW_CEILING_MODEL)))
+                    tiles.append(rim_tiles(model))
                 return tiles[0]
             return model(name)
 

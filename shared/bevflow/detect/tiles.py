@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Unpack
 
@@ -189,15 +190,21 @@ what YOLOX-nano (``yolox-nano-coco.onnx``, also shipped, more accurate on real f
 CENTRE_MODEL = TILE_MODEL.with_name("bevflow-person-centernet.onnx")
 
 
-def load_rim_tiles(threads: int = 2, tile_model: str | Path | None = None, **options: Unpack[DetectorOptions]) -> RimTileDetector:
+def rim_tiles(model: Callable[[Path], Detector], tile_model: str | Path | None = None) -> RimTileDetector:
     """The rim-tile detector with the shipped tile model (or ``tile_model``) on every tile, the
     shipped general model for the people right under the camera and the shipped low-ceiling model
-    for frames too coarse for the tiles; ``options`` go to all three."""
-    from bevflow.detect.runtime import LOW_CEILING_MODEL, Detector  # onnxruntime is imported only when a model loads
+    for frames too coarse for the tiles, each loaded by ``model`` (which may share what it loaded
+    with other cameras)."""
+    from bevflow.detect.runtime import LOW_CEILING_MODEL
 
-    tiles = Detector(tile_model or TILE_MODEL, threads=threads, **options)
-    return RimTileDetector(tiles, centre=Detector(CENTRE_MODEL, threads=threads, **options),
-                           coarse=Detector(LOW_CEILING_MODEL, threads=threads, **options))
+    return RimTileDetector(model(Path(tile_model or TILE_MODEL)), centre=model(CENTRE_MODEL), coarse=model(LOW_CEILING_MODEL))
+
+
+def load_rim_tiles(threads: int = 2, tile_model: str | Path | None = None, **options: Unpack[DetectorOptions]) -> RimTileDetector:
+    """``rim_tiles`` with each model loaded on its own; ``options`` go to all three."""
+    from bevflow.detect.runtime import Detector  # onnxruntime is imported only when a model loads
+
+    return rim_tiles(lambda path: Detector(path, threads=threads, **options), tile_model)
 
 
 def rotated_nms(rotated: FloatArray, scores: FloatArray, iou_threshold: float) -> NDArray[np.int64]:
