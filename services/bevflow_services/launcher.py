@@ -42,6 +42,30 @@ def free_port() -> int:
             return port
 
 
+def free_port_pair() -> int:
+    """A port from ``free_port`` whose next one is free too, for the demo (dashboard and 3D view).
+    A port free a moment ago says nothing of its neighbour, which a connection may hold."""
+    for _ in range(100):
+        port = free_port()
+        if port < 65535 and port_free(port + 1):
+            _ports_handed_out.add(port + 1)
+            return port
+    raise RuntimeError("no two free ports in a row on 127.0.0.1")
+
+
+def port_free(port: int) -> bool:
+    """Whether a server could listen on 127.0.0.1:``port`` now. Probed as uvicorn and asyncio
+    bind, with SO_REUSEADDR: a closed connection waiting out TIME_WAIT there does not stop them,
+    a listener or a live connection does."""
+    with socket.socket() as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe.bind(("127.0.0.1", port))
+        except OSError:
+            return False
+    return True
+
+
 @dataclass
 class Child:
     name: str

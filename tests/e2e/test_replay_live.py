@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from bevflow_services.launcher import free_port
+from bevflow_services.launcher import free_port_pair
 from tests.bevflow.evaluation.test_replay import write_recording
 from tests.bevflow.evaluation.test_wildtrack_tracking import STARTS, walkers
 
@@ -32,9 +32,7 @@ def tracks_now(base: str) -> list[dict]:
 def test_the_demo_shows_a_recording_of_boxes(tmp_path: Path) -> None:
     # three people walking 0.3 m per frame past two cameras, 8 frames at 4 a second, looped
     site, detections, _ = write_recording(walkers(0.3, hidden=None, ghost=None), tmp_path)
-    port = free_port()
-    while free_port() == port + 1:  # the 3D view takes the next port: make sure nobody holds it
-        pass
+    port = free_port_pair()  # the 3D view takes the next port
     logs = tmp_path / "logs"
     demo = subprocess.Popen(
         [sys.executable, "-m", "bevflow_services.cli", "demo", "--site", str(site), "--detections", str(detections),

@@ -1,16 +1,19 @@
-"""Which services ``start_pipeline`` starts, in which order and with which flags (no processes), and
-that a group stops its children when it is sent SIGTERM (real processes)."""
+"""Which services ``start_pipeline`` starts, in which order and with which flags (no processes),
+that a group stops its children when it is sent SIGTERM (real processes), and which ports it
+takes for free."""
 
 from __future__ import annotations
 
 import os
 import signal
+import socket
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 
+from bevflow_services import launcher
 from bevflow_services.launcher import start_pipeline
 
 
@@ -82,3 +85,20 @@ def test_a_sigterm_stops_the_group_and_its_children(tmp_path: Path) -> None:
         parent.kill()
     with pytest.raises(ProcessLookupError):  # stopped and reaped, not left running in its own session
         os.kill(child_pid, 0)
+
+
+@pytest.mark.parametrize(("held_by", "free"), [(None, True), ("listener", False), ("bound socket", False)])
+def test_a_port_is_free_unless_a_listener_or_a_socket_holds_it(held_by: str | None, free: bool) -> None:
+    port = launcher.free_port()
+    with socket.socket() as holder:
+        if held_by is not None:
+            holder.bind(("127.0.0.1", port))
+            if held_by == "listener":
+                holder.listen()
+        assert launcher.port_free(port) is free
+
+
+def test_a_port_pair_is_two_free_ports_neither_handed_out_again() -> None:
+    port = launcher.free_port_pair()
+    assert launcher.port_free(port) and launcher.port_free(port + 1)
+    assert all(launcher.free_port() not in (port, port + 1) for _ in range(200))

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import socket
 import tempfile
 import time
 from pathlib import Path
@@ -56,15 +55,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from bevflow_services import extras
-    from bevflow_services.launcher import TEMPORARY_DB, ServiceGroup, start_pipeline
+    from bevflow_services.launcher import TEMPORARY_DB, ServiceGroup, port_free, start_pipeline
 
     extras.require("services")  # here, not as each service it starts fails on its own
     for port in (args.port, args.port + 1):
-        with socket.socket() as probe:
-            try:
-                probe.bind(("127.0.0.1", port))
-            except OSError:
-                raise UserError(f"port {port} is already in use; choose another with --port") from None
+        if not port_free(port):
+            raise UserError(f"port {port} is already in use; choose another with --port")
     boxes, ingest_args = _boxes(args)
     if args.no_history_db and args.history_db:
         raise UserError("--history-db and --no-history-db contradict each other; give one of them")

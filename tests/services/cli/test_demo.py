@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import socket
 from pathlib import Path
 
 import pytest
@@ -42,25 +41,6 @@ def started(monkeypatch: pytest.MonkeyPatch) -> list[dict]:
     return calls
 
 
-def port_pair() -> int:
-    """A free port whose next one is free too (the demo takes both: dashboard and 3D view). A
-    port free a moment ago says nothing of its neighbour, which another connection may hold."""
-    for _ in range(100):
-        port = launcher.free_port()
-        if port < 65535 and bindable(port + 1):
-            return port
-    raise RuntimeError("no two free ports in a row on 127.0.0.1")
-
-
-def bindable(port: int) -> bool:
-    with socket.socket() as probe:
-        try:
-            probe.bind(("127.0.0.1", port))
-        except OSError:
-            return False
-    return True
-
-
 @pytest.mark.parametrize(
     ("argv", "boxes", "history_db", "ingest_args"),
     [
@@ -72,21 +52,21 @@ def bindable(port: int) -> bool:
 )
 def test_the_demo_runs_the_detector_on_rendered_frames_by_default(started: list[dict], tmp_path: Path, argv: list[str],
                                                                    boxes: str, history_db: str | None, ingest_args: tuple) -> None:
-    port = port_pair()
+    port = launcher.free_port_pair()
     code = main(["demo", "--port", str(port), "--duration", "0", "--log-dir", str(tmp_path), *argv])
     assert code == 0
     assert started == [{"site": "demo-hall", "port": port, "boxes": boxes, "history_db": history_db, "ingest_args": ingest_args}]
 
 
 def test_camera_fps_is_refused_without_rendered_frames(started: list[dict], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
-    code = main(["demo", "--port", str(port_pair()), "--boxes", "simulated", "--camera-fps", "5", "--log-dir", str(tmp_path)])
+    code = main(["demo", "--port", str(launcher.free_port_pair()), "--boxes", "simulated", "--camera-fps", "5", "--log-dir", str(tmp_path)])
     assert code == 2
     assert "--camera-fps sets the rate of rendered frames" in capsys.readouterr().err
     assert started == []
 
 
 def test_contradicting_history_options_are_refused(started: list[dict], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
-    code = main(["demo", "--port", str(port_pair()), "--history-db", "x.db", "--no-history-db", "--log-dir", str(tmp_path)])
+    code = main(["demo", "--port", str(launcher.free_port_pair()), "--history-db", "x.db", "--no-history-db", "--log-dir", str(tmp_path)])
     assert code == 2
     assert "--history-db and --no-history-db" in capsys.readouterr().err
     assert started == []
@@ -95,7 +75,7 @@ def test_contradicting_history_options_are_refused(started: list[dict], tmp_path
 @pytest.mark.parametrize(("fps", "expected"), [((), "4.0"), (("--fps", "2.5"), "2.5")])
 def test_a_recording_of_boxes_is_replayed_without_the_detector(started: list[dict], tmp_path: Path, fps: tuple,
                                                                  expected: str) -> None:
-    port = port_pair()
+    port = launcher.free_port_pair()
     code = main(["demo", "--port", str(port), "--duration", "0", "--log-dir", str(tmp_path), "--site", "site.yaml",
                  "--detections", str(tmp_path), *fps])
     assert code == 0
@@ -114,5 +94,5 @@ def test_a_recording_of_boxes_is_replayed_without_the_detector(started: list[dic
 )
 def test_replay_options_are_checked(started: list[dict], tmp_path: Path, capsys: pytest.CaptureFixture, argv, message) -> None:
     argv = [a.replace("DIR", str(tmp_path)) for a in argv]
-    assert main(["demo", "--port", str(port_pair()), "--log-dir", str(tmp_path), *argv]) == 2
+    assert main(["demo", "--port", str(launcher.free_port_pair()), "--log-dir", str(tmp_path), *argv]) == 2
     assert message in capsys.readouterr().err and started == []
