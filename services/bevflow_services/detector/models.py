@@ -78,19 +78,19 @@ class CameraModels:
         load: type[Detector] = Detector,
     ) -> None:
         options: DetectorOptions = {"score_threshold": score_threshold, "providers": providers}
-        by_path: dict[Path, Detector] = {}
+        by_path: dict[tuple[Path, int], Detector] = {}
         tiles: list[RimTileDetector] = []  # one tile detector serves every camera that asks for it
 
-        def model(name: str | Path) -> Detector:
+        def model(name: str | Path, n: int = threads) -> Detector:
             path = resolve_model(name, site_dir).resolve()
-            if path not in by_path:
-                by_path[path] = load(path, threads, **options)
-            return by_path[path]
+            if (path, n) not in by_path:
+                by_path[path, n] = load(path, n, **options)
+            return by_path[path, n]
 
         def named(name: str | Path) -> Detector | RimTileDetector:
             if str(name) == RIM_TILES:
                 if not tiles:
-                    tiles.append(rim_tiles(model))
+                    tiles.append(rim_tiles(model, threads))
                 return tiles[0]
             return model(name)
 

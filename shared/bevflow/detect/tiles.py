@@ -29,7 +29,11 @@ few tens of pixels across, blurred further by the enlargement, and the photograp
 model misses them (our renders at 3–5 m, drawn at the render-trained models' scale: AP50 0.599).
 Such a frame goes whole through ``coarse`` instead, the render-trained low-ceiling model, which
 was trained on people that size (0.894 on the same renders). Real ceiling cameras from 1280 × 720
-up have larger circles and keep the tiles. It serves cameras under 5 m by default
+up have larger circles and keep the tiles.
+
+**Threads.** FastestDet is small: on two ONNX Runtime threads each layer's work is too little to
+share, and eight tiles took 32 ms on two threads against 46 ms on one. Shared among two workers of
+one thread each, two tiles at a time, they take 26 ms (2048 px frames, 2 cores). It serves cameras under 5 m by default
 (``bevflow.detect.runtime.DEFAULT_RANGES``): on real frames it finds most people, where the
 render-trained models find few (docs/RESULTS.md, "Real frames").
 """
@@ -39,6 +43,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import TYPE_CHECKING, Unpack
 
@@ -76,15 +81,20 @@ class RimTileDetector:
     FastestDet), given all of a frame's tiles in one ``detect_batch_scaled`` call. ``centre``:
     optional detector (with ``detect(image, height, focal)``) for the people right under the
     camera, run on the middle of the frame only. ``coarse``: optional detector for whole frames
-    too coarse for the tiles (module docstring, "Coarse frames")."""
+    too coarse for the tiles (module docstring, "Coarse frames"). ``workers``: threads the tiles
+    are shared among, each a call of its own (module docstring, "Threads")."""
 
     def __init__(self, tile_detector: Detector, layout: TileLayout = TileLayout(), centre: Detector | None = None,
                  centre_share: float = 0.3, field_of_view_deg: float = DEFAULT_FIELD_OF_VIEW_DEG,
-                 coarse: Detector | None = None) -> None:  # fmt: skip
+                 coarse: Detector | None = None, workers: int = 1) -> None:  # fmt: skip
         hw = getattr(tile_detector, "fixed_hw", None)
         if hw is None or hw[0] != hw[1]:
             raise ValueError("the tile detector needs a fixed square input")
+        if workers < 1:
+            raise ValueError(f"workers must be >= 1, got {workers}")
         self.tile_detector, self.layout, self.centre, self.coarse = tile_detector, layout, centre, coarse
+        self.workers = workers
+        self._pool = ThreadPoolExecutor(workers, thread_name_prefix="rim-tiles") if workers > 1 else None
         self.centre_share, self.half_view = centre_share, math.radians(field_of_view_deg / 2)
         self.input_px = int(hw[0])
 
@@ -126,6 +136,21 @@ class RimTileDetector:
             rotated, conf = np.concatenate([rotated[inner], mid[near]]), np.concatenate([conf[inner], boxes.confidence[near]])
         return rotated, conf
 
+    def _detect_tiles(self, small: NDArray[np.uint8], maps: list[FloatArray]) -> list[Boxes]:
+        """Each tile's boxes, in the order of ``maps`` (frame to tile): cut and detected in one go,
+        or each worker cutting and detecting its share of the tiles."""
+        if self._pool is None:
+            return self._cut_and_detect(small, maps)
+        done = [self._pool.submit(self._cut_and_detect, small, maps[k :: self.workers]) for k in range(self.workers)]
+        found = [f.result() for f in done]
+        return [found[i % self.workers][i // self.workers] for i in range(len(maps))]
+
+    def _cut_and_detect(self, small: NDArray[np.uint8], maps: list[FloatArray]) -> list[Boxes]:
+        n = self.input_px
+        tiles = [np.asarray(cv2.warpAffine(small, m, (n, n), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT), dtype=np.uint8)
+                 for m in maps]  # fmt: skip
+        return self.tile_detector.detect_batch_scaled(tiles, [1.0] * len(tiles))
+
     def tile_enlargement(self, radius: float) -> float:
         """How many times a frame's pixels are enlarged into the tiles, for an image circle of
         ``radius`` px (below 1: shrunk)."""
@@ -143,10 +168,8 @@ class RimTileDetector:
         c = ((centre[0] + 0.5) * k_small - 0.5, (centre[1] + 0.5) * k_small - 0.5)
         angles = [2 * math.pi * t / lay.tiles for t in range(lay.tiles)]
         maps = [tile_affine(theta, c, radius * k_small, lay, n) for theta in angles]
-        tiles = [np.asarray(cv2.warpAffine(small, m, (n, n), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT), dtype=np.uint8)
-                 for m, _, _ in maps]  # fmt: skip
         found, scores = [], []
-        for theta, (_, back, offset), boxes in zip(angles, maps, self.tile_detector.detect_batch_scaled(tiles, [1.0] * len(tiles)), strict=True):
+        for theta, (_, back, offset), boxes in zip(angles, maps, self._detect_tiles(small, [m for m, _, _ in maps]), strict=True):
             x = boxes.xyxy
             whole = (x[:, 0] > EDGE_PX) & (x[:, 2] < n - 1 - EDGE_PX)
             x, conf = x[whole], boxes.confidence[whole]
@@ -190,21 +213,23 @@ what YOLOX-nano (``yolox-nano-coco.onnx``, also shipped, more accurate on real f
 CENTRE_MODEL = TILE_MODEL.with_name("bevflow-person-centernet.onnx")
 
 
-def rim_tiles(model: Callable[[Path], Detector], tile_model: str | Path | None = None) -> RimTileDetector:
-    """The rim-tile detector with the shipped tile model (or ``tile_model``) on every tile, the
+def rim_tiles(model: Callable[[Path, int], Detector], threads: int, tile_model: str | Path | None = None) -> RimTileDetector:
+    """The rim-tile detector with the shipped tile model (or ``tile_model``) on every tile, shared
+    among ``threads`` workers of one ONNX Runtime thread each, and on ``threads`` threads the
     shipped general model for the people right under the camera and the shipped low-ceiling model
-    for frames too coarse for the tiles, each loaded by ``model`` (which may share what it loaded
-    with other cameras)."""
+    for frames too coarse for the tiles; ``model(path, threads)`` loads each (and may share what
+    it loaded with other cameras)."""
     from bevflow.detect.runtime import LOW_CEILING_MODEL
 
-    return RimTileDetector(model(Path(tile_model or TILE_MODEL)), centre=model(CENTRE_MODEL), coarse=model(LOW_CEILING_MODEL))
+    return RimTileDetector(model(Path(tile_model or TILE_MODEL), 1), centre=model(CENTRE_MODEL, threads),
+                           coarse=model(LOW_CEILING_MODEL, threads), workers=threads)  # fmt: skip
 
 
 def load_rim_tiles(threads: int = 2, tile_model: str | Path | None = None, **options: Unpack[DetectorOptions]) -> RimTileDetector:
     """``rim_tiles`` with each model loaded on its own; ``options`` go to all three."""
     from bevflow.detect.runtime import Detector  # onnxruntime is imported only when a model loads
 
-    return rim_tiles(lambda path: Detector(path, threads=threads, **options), tile_model)
+    return rim_tiles(lambda path, n: Detector(path, threads=n, **options), threads, tile_model)
 
 
 def rotated_nms(rotated: FloatArray, scores: FloatArray, iou_threshold: float) -> NDArray[np.int64]:

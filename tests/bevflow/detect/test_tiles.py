@@ -29,10 +29,14 @@ class UprightBlobs:
     fixed_hw = (128, 128)
 
     def __init__(self) -> None:
-        self.tiles = 0
+        self.calls: list[int] = []  # appended to, which is atomic: workers may call at once
+
+    @property
+    def tiles(self) -> int:
+        return len(self.calls)
 
     def detect_scaled(self, tile: np.ndarray, scale: float = 1.0) -> Boxes:
-        self.tiles += 1
+        self.calls.append(1)
         count, _, stats, _ = cv2.connectedComponentsWithStats((tile.max(axis=2) > 100).astype(np.uint8))
         rows = [(x, y, x + w, y + h) for x, y, w, h, area in stats[1:count] if h > 1.3 * w and area > 4]
         return Boxes(np.array(rows, dtype=float).reshape(-1, 4), np.full(len(rows), 0.9))
@@ -138,3 +142,18 @@ def test_a_frame_too_coarse_for_the_tiles_goes_whole_to_the_coarse_model(radius:
     if coarse:  # the model's own box for the pipeline, turned radially for rotated scoring
         assert boxes.xyxy.tolist() == [[100.0, 200.0, 120.0, 260.0]] and conf.tolist() == [0.7]
         assert whole.frames[0] == (440, 3.0, focal) and len(rotated) == 1
+
+
+@pytest.mark.parametrize("workers", [2, 3, 8])
+def test_tiles_shared_among_workers_find_what_one_call_finds(workers: int) -> None:
+    people = [_radial_person(d, r) for d, r in [(10.0, 90.0), (100.0, 130.0), (190.0, 70.0), (280.0, 150.0), (330.0, 120.0)]]
+    one, shared = UprightBlobs(), UprightBlobs()
+    expected = RimTileDetector(one).detect_rotated(_frame(people), 3.0, FOCAL, CENTRE)
+    found = RimTileDetector(shared, workers=workers).detect_rotated(_frame(people), 3.0, FOCAL, CENTRE)
+    assert shared.tiles == one.tiles == 8
+    assert np.array_equal(found[0], expected[0]) and np.array_equal(found[1], expected[1]) and len(found[0]) == 5
+
+
+def test_workers_must_be_at_least_one() -> None:
+    with pytest.raises(ValueError, match="workers must be >= 1"):
+        RimTileDetector(UprightBlobs(), workers=0)
