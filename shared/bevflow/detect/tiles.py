@@ -21,29 +21,29 @@ boxes outside it.
 The layout (8 tiles of 0.8 × the radius from 0.1 × the radius out) suits ceilings of about 3 m,
 where people are large in the frame; ``load_rim_tiles`` builds the detector with the shipped
 FastestDet (COCO, BSD-3-Clause: see the model card) on the tiles and the shipped render-trained
-model within 0.3 × the radius.
+model within 0.3 × the radius. It serves cameras under 5 m by default
+(``bevflow.detect.runtime.DEFAULT_RANGES``): on real frames it finds most people, where the
+render-trained models find few (docs/RESULTS.md, "Real frames").
 
 **Coarse frames.** A frame whose image circle is small (under about 290 px of radius for a 190°
 lens) would have its tiles enlarged more than ``MAX_TILE_ENLARGEMENT`` times: people there are a
 few tens of pixels across, blurred further by the enlargement, and the photograph-trained tile
 model misses them (our renders at 3–5 m, drawn at the render-trained models' scale: AP50 0.599).
 Such a frame goes whole through ``coarse`` instead, the render-trained low-ceiling model, which
-was trained on people that size (0.894 on the same renders). Real ceiling cameras from 1280 × 720
+was trained on people that size (0.925 on the same renders). Real ceiling cameras from 1280 × 720
 up have larger circles and keep the tiles.
 
 **Threads.** FastestDet is small: on two ONNX Runtime threads each layer's work is too little to
 share, and eight tiles took 32 ms on two threads against 46 ms on one. Shared among two workers of
-one thread each, two tiles at a time, they take 26 ms (2048 px frames, 2 cores). It serves cameras under 5 m by default
-(``bevflow.detect.runtime.DEFAULT_RANGES``): on real frames it finds most people, where the
-render-trained models find few (docs/RESULTS.md, "Real frames").
+one thread each, two tiles at a time, they take 26 ms (2048 px frames, 2 cores).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Unpack
 
@@ -78,7 +78,7 @@ class TileLayout:
 
 class RimTileDetector:
     """``tile_detector``: a ``bevflow.detect.runtime.Detector`` with a fixed square input (e.g.
-    FastestDet), given all of a frame's tiles in one ``detect_batch_scaled`` call. ``centre``:
+    FastestDet), given a frame's tiles in one ``detect_batch_scaled`` call per worker. ``centre``:
     optional detector (with ``detect(image, height, focal)``) for the people right under the
     camera, run on the middle of the frame only. ``coarse``: optional detector for whole frames
     too coarse for the tiles (module docstring, "Coarse frames"). ``workers``: threads the tiles
