@@ -106,7 +106,6 @@ class CameraModels:
             raise DetectorError(f"no detector model covers a camera {height_m:.2f} m high (ranges: {spans})")
 
         self.detectors: dict[str, Detector | RimTileDetector] = {}
-        self._focal_px = {c.id: float(site.camera(c.id).K[0, 0]) for c in site.cameras}
         for config in site.cameras:
             if cameras is not None and config.id not in cameras:
                 continue
@@ -127,16 +126,8 @@ class CameraModels:
         return {c: (models[c][:LABEL_MAX], (_provider(d) or "unknown")[:LABEL_MAX]) for c, d in self.detectors.items()}
 
     def models(self) -> dict[str, str]:
-        """The model file of each camera, for the start-up log: rim-tiles, or the coarse-frame
-        model for a camera whose calibrated frames are too coarse for the tiles."""
-        return {c: self._model_name(c, d) for c, d in self.detectors.items()}
-
-    def _model_name(self, camera: str, detector: Detector | RimTileDetector) -> str:
-        if not isinstance(detector, RimTileDetector):
-            return detector.model_path.name
-        if detector.coarse is not None and detector.too_coarse(self._focal_px[camera]):
-            return detector.coarse.model_path.name
-        return RIM_TILES
+        """The model file of each camera, for the start-up log."""
+        return {c: RIM_TILES if isinstance(d, RimTileDetector) else d.model_path.name for c, d in self.detectors.items()}
 
 
 def _provider(detector: Detector | RimTileDetector) -> str | None:

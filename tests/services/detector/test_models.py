@@ -25,7 +25,6 @@ cameras:
   - {id: low, image_size: [800, 800], intrinsics: {fx: 250, fy: 250, cx: 399.5, cy: 399.5}, pose: {position: [0, 0, 3.5]}}
   - {id: high, image_size: [800, 800], intrinsics: {fx: 250, fy: 250, cx: 399.5, cy: 399.5}, pose: {position: [5, 0, 8.0]}}
   - {id: own, image_size: [800, 800], intrinsics: {fx: 250, fy: 250, cx: 399.5, cy: 399.5}, pose: {position: [9, 0, 4.0]}, detector: %s}
-  - {id: coarse, image_size: [400, 400], intrinsics: {fx: 120, fy: 120, cx: 199.5, cy: 199.5}, pose: {position: [0, 4, 3.0]}}
 """
 
 
@@ -72,10 +71,7 @@ def test_cameras_get_their_own_model_or_the_one_for_their_height(tmp_path: Path)
     low = models["low"]
     assert isinstance(low, RimTileDetector) and low.tile_detector.model_path == TILE_MODEL
     assert models["high"].model_path == DEFAULT_MODEL
-    # A camera whose frames are too coarse for the tiles is served by the low-ceiling model.
-    assert models["coarse"] is low and low.coarse is not None and low.coarse.model_path == LOW_CEILING_MODEL
-    assert models.models() == {"low": "rim-tiles", "high": DEFAULT_MODEL.name, "own": "own.onnx",
-                               "coarse": LOW_CEILING_MODEL.name}
+    assert models.models() == {"low": "rim-tiles", "high": DEFAULT_MODEL.name, "own": "own.onnx"}
 
 
 def test_cameras_naming_the_same_file_share_one_loaded_model(tmp_path: Path) -> None:
@@ -101,7 +97,7 @@ def test_height_ranges_choose_the_model_of_cameras_that_name_none(tmp_path: Path
     site = parse_site(SITE % "null")
     ranges = [HeightRange(6.0, 10.0, high), HeightRange(3.0, 6.0, low)]
     models = CameraModels(site, ranges=ranges, load=FakeDetector)
-    assert models.models() == {"low": "low.onnx", "high": "high.onnx", "own": "low.onnx", "coarse": "low.onnx"}
+    assert models.models() == {"low": "low.onnx", "high": "high.onnx", "own": "low.onnx"}
     with pytest.raises(DetectorError, match="no detector model covers a camera 8.00 m high"):
         CameraModels(site, ranges=[HeightRange(3.0, 6.0, low)], load=FakeDetector)
 
@@ -115,7 +111,7 @@ detectors:
   - {min_height_m: 6, max_height_m: 10, model: high.onnx}
 """
     models = CameraModels(parse_site(text), site_dir=tmp_path, load=FakeDetector)
-    assert models.models() == {"low": "low.onnx", "high": "high.onnx", "own": "low.onnx", "coarse": "low.onnx"}
+    assert models.models() == {"low": "low.onnx", "high": "high.onnx", "own": "low.onnx"}
 
 
 @pytest.mark.parametrize(
