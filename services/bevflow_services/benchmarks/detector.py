@@ -5,8 +5,7 @@ with the model that serves each height (``DEFAULT_RANGES``, unless a model is gi
 rendered frame of each height (``bevflow.detect.benchmark.rendered_frame``: a crowd drawn
 at 1.5 x the detector's scale, as a camera's own frame is larger than the model's input). The
 rim tiles are timed on that frame enlarged to ``REAL_FRAME_PX`` square, the size of the real
-ceiling cameras they serve: the rendered frame itself is too coarse for them and would time
-their coarse-frame model (``bevflow.detect.tiles``, "Coarse frames"). Without
+ceiling cameras they serve: their cost grows with the frame they shrink. Without
 a model file (none given and none shipped) or without ONNX Runtime, nothing is timed and the
 result says why: no number is made up.
 
@@ -121,10 +120,10 @@ def bench_detector(
 
 def camera_sized(detector: Detector | RimTileDetector, frame: np.ndarray, focal: float) -> tuple[np.ndarray, float]:
     """``frame`` and its focal length, enlarged to ``REAL_FRAME_PX`` for the rim tiles when it is
-    too coarse for them (module docstring)."""
+    smaller (module docstring)."""
     from bevflow.detect.tiles import RimTileDetector
 
-    if not isinstance(detector, RimTileDetector) or not detector.too_coarse(focal):
+    if not isinstance(detector, RimTileDetector) or frame.shape[1] >= REAL_FRAME_PX:
         return frame, focal
     k = REAL_FRAME_PX / frame.shape[1]
     return cv2.resize(frame, None, fx=k, fy=k, interpolation=cv2.INTER_LINEAR), focal * k

@@ -25,13 +25,11 @@ model within 0.3 × the radius. It serves cameras under 5 m by default
 (``bevflow.detect.runtime.DEFAULT_RANGES``): on real frames it finds most people, where the
 render-trained models find few (docs/RESULTS.md, "Real frames").
 
-**Coarse frames.** A frame whose image circle is small (under about 290 px of radius for a 190°
-lens) would have its tiles enlarged more than ``MAX_TILE_ENLARGEMENT`` times: people there are a
-few tens of pixels across, blurred further by the enlargement, and the photograph-trained tile
-model misses them (our renders at 3–5 m, drawn at the render-trained models' scale: AP50 0.599).
-Such a frame goes whole through ``coarse`` instead, the render-trained low-ceiling model, which
-was trained on people that size (0.925 on the same renders). Real ceiling cameras from 1280 × 720
-up have larger circles and keep the tiles.
+**Small frames.** The tiles serve low-resolution cameras too: the real frames of docs/RESULTS.md
+("Real frames"), shrunk from 2048 to 512 or 400 px (tiles enlarged 1.7 and 2.2 times), still
+score AP50_rotated 0.84 and 0.78 through them, where the render-trained low-ceiling model scores
+0.00. Our renders under 5 m, about as coarse, score 0.60: their people are rendered, not
+photographed, and so are the people the render-trained models learnt.
 
 **Threads.** FastestDet is small: on two ONNX Runtime threads each layer's work is too little to
 share, and eight tiles took 32 ms on two threads against 46 ms on one. Shared among two workers of
@@ -61,7 +59,6 @@ if TYPE_CHECKING:  # loaded only when a model loads, as in load_rim_tiles
 
 FloatArray = NDArray[np.float64]
 EDGE_PX = 2.0  # a box this close to a tile's side edge is cut by it
-MAX_TILE_ENLARGEMENT = 1.5  # a frame whose tiles would be enlarged more goes to the coarse-frame model
 CENTRE_MARGIN_SHARE = 0.25  # of the radius: how far a person kept by the centre model may reach out
 
 
@@ -80,19 +77,18 @@ class RimTileDetector:
     """``tile_detector``: a ``bevflow.detect.runtime.Detector`` with a fixed square input (e.g.
     FastestDet), given a frame's tiles in one ``detect_batch_scaled`` call per worker. ``centre``:
     optional detector (with ``detect(image, height, focal)``) for the people right under the
-    camera, run on the middle of the frame only. ``coarse``: optional detector for whole frames
-    too coarse for the tiles (module docstring, "Coarse frames"). ``workers``: threads the tiles
-    are shared among, each a call of its own (module docstring, "Threads")."""
+    camera, run on the middle of the frame only. ``workers``: threads the tiles are shared among,
+    each a call of its own (module docstring, "Threads")."""
 
     def __init__(self, tile_detector: Detector, layout: TileLayout = TileLayout(), centre: Detector | None = None,
                  centre_share: float = 0.3, field_of_view_deg: float = DEFAULT_FIELD_OF_VIEW_DEG,
-                 coarse: Detector | None = None, workers: int = 1) -> None:  # fmt: skip
+                 workers: int = 1) -> None:  # fmt: skip
         hw = getattr(tile_detector, "fixed_hw", None)
         if hw is None or hw[0] != hw[1]:
             raise ValueError("the tile detector needs a fixed square input")
         if workers < 1:
             raise ValueError(f"workers must be >= 1, got {workers}")
-        self.tile_detector, self.layout, self.centre, self.coarse = tile_detector, layout, centre, coarse
+        self.tile_detector, self.layout, self.centre = tile_detector, layout, centre
         self.workers = workers
         self._pool = ThreadPoolExecutor(workers, thread_name_prefix="rim-tiles") if workers > 1 else None
         self.centre_share, self.half_view = centre_share, math.radians(field_of_view_deg / 2)
@@ -103,8 +99,6 @@ class RimTileDetector:
         """Person boxes as the pipeline takes them: each rotated box's enclosing rectangle.
         ``centre``: the point people lie radially about (the camera's nadir in the image);
         default the middle of ``image_bgr``."""
-        if self.coarse is not None and self.too_coarse(focal_px):  # its own boxes, not their radial enclosure
-            return self.coarse.detect(image_bgr, camera_height_m, focal_px)
         h, w = image_bgr.shape[:2]
         rotated, conf = self.detect_rotated(image_bgr, camera_height_m, focal_px, centre or ((w - 1) / 2, (h - 1) / 2))
         return Boxes(rotated_to_xyxy(rotated), conf)
@@ -114,9 +108,6 @@ class RimTileDetector:
         """Rotated boxes (N, 5) and their scores; ``centre`` is the image circle's centre and its
         radius is ``focal_px`` times the lens's half view."""
         radius = focal_px * self.half_view
-        if self.coarse is not None and self.too_coarse(focal_px):
-            boxes = self.coarse.detect(image_bgr, camera_height_m, focal_px)
-            return radial_boxes(boxes.xyxy, centre), boxes.confidence
         k = self.tile_enlargement(radius)
         small = shrunk(image_bgr, k) if k < 1 else image_bgr  # each tile is then only turned, not shrunk
         k_small = small.shape[1] / image_bgr.shape[1]
@@ -155,10 +146,6 @@ class RimTileDetector:
         """How many times a frame's pixels are enlarged into the tiles, for an image circle of
         ``radius`` px (below 1: shrunk)."""
         return self.input_px / (self.layout.side_share * radius)
-
-    def too_coarse(self, focal_px: float) -> bool:
-        """Whether a frame of this focal length goes to ``coarse`` (when given) instead of the tiles."""
-        return self.tile_enlargement(focal_px * self.half_view) > MAX_TILE_ENLARGEMENT
 
     def _tiles(self, small: NDArray[np.uint8], k_small: float, centre: tuple[float, float],
                radius: float) -> tuple[FloatArray, FloatArray]:  # fmt: skip
@@ -215,18 +202,14 @@ CENTRE_MODEL = TILE_MODEL.with_name("bevflow-person-centernet.onnx")
 
 def rim_tiles(model: Callable[[Path, int], Detector], threads: int, tile_model: str | Path | None = None) -> RimTileDetector:
     """The rim-tile detector with the shipped tile model (or ``tile_model``) on every tile, shared
-    among ``threads`` workers of one ONNX Runtime thread each, and on ``threads`` threads the
-    shipped general model for the people right under the camera and the shipped low-ceiling model
-    for frames too coarse for the tiles; ``model(path, threads)`` loads each (and may share what
-    it loaded with other cameras)."""
-    from bevflow.detect.runtime import LOW_CEILING_MODEL
-
-    return RimTileDetector(model(Path(tile_model or TILE_MODEL), 1), centre=model(CENTRE_MODEL, threads),
-                           coarse=model(LOW_CEILING_MODEL, threads), workers=threads)  # fmt: skip
+    among ``threads`` workers of one ONNX Runtime thread each, and the shipped general model on
+    ``threads`` threads for the people right under the camera; ``model(path, threads)`` loads
+    each (and may share what it loaded with other cameras)."""
+    return RimTileDetector(model(Path(tile_model or TILE_MODEL), 1), centre=model(CENTRE_MODEL, threads), workers=threads)
 
 
 def load_rim_tiles(threads: int = 2, tile_model: str | Path | None = None, **options: Unpack[DetectorOptions]) -> RimTileDetector:
-    """``rim_tiles`` with each model loaded on its own; ``options`` go to all three."""
+    """``rim_tiles`` with each model loaded on its own; ``options`` go to both."""
     from bevflow.detect.runtime import Detector  # onnxruntime is imported only when a model loads
 
     return rim_tiles(lambda path, n: Detector(path, threads=n, **options), threads, tile_model)

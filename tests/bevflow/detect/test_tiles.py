@@ -111,39 +111,6 @@ def test_the_shipped_tile_model_is_named() -> None:
         assert (TILE_MODEL.parent / f"LICENSE-{model}.txt").is_file() and f"{model}.onnx" in (ROOT / "NOTICE").read_text()
 
 
-class WholeFrame:
-    """Stands in for the coarse-frame model: one box, and a note of what it was given."""
-
-    def __init__(self) -> None:
-        self.frames: list[tuple[int, float, float]] = []
-
-    def detect(self, image_bgr: np.ndarray, camera_height_m: float, focal_px: float) -> Boxes:
-        self.frames.append((image_bgr.shape[1], camera_height_m, focal_px))
-        return Boxes([[100.0, 200.0, 120.0, 260.0]], [0.7])
-
-
-@pytest.mark.parametrize(
-    ("radius", "coarse"),
-    [
-        (200.0, False),  # tiles shrunk: 128 px from 160
-        (128 / 0.8 / 1.45, False),  # enlarged 1.45 times
-        (128 / 0.8 / 1.55, True),  # enlarged 1.55 times: too coarse
-        (60.0, True),
-    ],
-)
-def test_a_frame_too_coarse_for_the_tiles_goes_whole_to_the_coarse_model(radius: float, coarse: bool) -> None:
-    tiles, whole = UprightBlobs(), WholeFrame()
-    detector = RimTileDetector(tiles, coarse=whole)  # type: ignore[arg-type]
-    focal = radius / math.radians(95)
-    frame = _frame([_radial_person(0.0, 110.0)])
-    boxes = detector.detect(frame, 3.0, focal, CENTRE)
-    rotated, conf = detector.detect_rotated(frame, 3.0, focal, CENTRE)
-    assert (tiles.tiles == 0) == coarse and len(whole.frames) == (2 if coarse else 0)
-    if coarse:  # the model's own box for the pipeline, turned radially for rotated scoring
-        assert boxes.xyxy.tolist() == [[100.0, 200.0, 120.0, 260.0]] and conf.tolist() == [0.7]
-        assert whole.frames[0] == (440, 3.0, focal) and len(rotated) == 1
-
-
 @pytest.mark.parametrize("workers", [2, 3, 8])
 def test_tiles_shared_among_workers_find_what_one_call_finds(workers: int) -> None:
     people = [_radial_person(d, r) for d, r in [(10.0, 90.0), (100.0, 130.0), (190.0, 70.0), (280.0, 150.0), (330.0, 120.0)]]

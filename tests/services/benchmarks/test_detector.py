@@ -87,15 +87,14 @@ class FixedTiles:
 @pytest.mark.parametrize(
     ("side", "focal", "tiles", "sized"),
     [
-        (300, 60.0, True, 2048),  # a rendered frame too coarse for the tiles: timed at a real camera's size
+        (300, 60.0, True, 2048),  # a rendered frame: the tiles are timed at a real camera's size
         (2048, 618.0, True, 2048),  # already a real camera's frame
-        (1200, 400.0, True, 1200),  # fine enough for the tiles as it is
         (300, 60.0, False, 300),  # other models take the rendered frame
     ],
 )
 def test_rim_tiles_are_timed_on_a_frame_of_a_real_cameras_size(side: int, focal: float, tiles: bool, sized: int) -> None:
     from bevflow.detect.tiles import RimTileDetector
 
-    detector = RimTileDetector(FixedTiles(), coarse=FakeDetector(2)) if tiles else FakeDetector(2)  # type: ignore[arg-type]
+    detector = RimTileDetector(FixedTiles()) if tiles else FakeDetector(2)  # type: ignore[arg-type]
     frame, f = detector_bench.camera_sized(detector, np.zeros((side, side, 3), np.uint8), focal)  # type: ignore[arg-type]
     assert frame.shape == (sized, sized, 3) and f == pytest.approx(focal * sized / side)
