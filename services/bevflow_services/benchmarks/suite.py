@@ -39,7 +39,7 @@ class Settings:
     live_camera_steps: tuple[int, ...] = (4, 8, 16, 32, 64)
     live_probe_duration_s: float = 10.0
     live_bisect: bool = True
-    live_detector_camera_steps: tuple[int, ...] = (1, 2, 4)
+    live_detector_camera_steps: tuple[int, ...] = (1, 2, 4, 5, 6, 8)  # beyond the 6 a 2-core host should serve
     gateway_rate: float = 200.0
     gateway_duration_s: float = 20.0
     gateway_subscribers: int = 100
