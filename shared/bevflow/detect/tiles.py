@@ -115,8 +115,11 @@ class RimTileDetector:
         if self.centre is not None:
             inner = np.hypot(rotated[:, 0] - centre[0], rotated[:, 1] - centre[1]) >= self.centre_share * radius
             # Only the middle of the frame: a person kept there reaches at most a few tenths of
-            # the radius beyond ``centre_share``. The shrunk frame serves: under 5 m the centre
-            # model's scale is below the tiles'.
+            # the radius beyond ``centre_share``. The shrunk frame serves where the centre model
+            # shrinks it further anyway (rim tiles on cameras under about 8 m).
+            scale_for = getattr(self.centre, "scale_for", None)
+            if scale_for is not None and scale_for(camera_height_m, focal_px) > k_small:
+                small, k_small = image_bgr, 1.0
             half = int(math.ceil((self.centre_share + CENTRE_MARGIN_SHARE) * radius * k_small))
             cx, cy = int(centre[0] * k_small), int(centre[1] * k_small)
             x0, y0 = max(0, cx - half), max(0, cy - half)

@@ -124,3 +124,33 @@ def test_tiles_shared_among_workers_find_what_one_call_finds(workers: int) -> No
 def test_workers_must_be_at_least_one() -> None:
     with pytest.raises(ValueError, match="workers must be >= 1"):
         RimTileDetector(UprightBlobs(), workers=0)
+
+
+class CentreModel:
+    """Stands in for the centre model: its own scale, and what it was given."""
+
+    def __init__(self, scale: float) -> None:
+        self.scale = scale
+        self.given: list[tuple[int, float]] = []
+
+    def scale_for(self, camera_height_m: float, focal_px: float) -> float:
+        return self.scale
+
+    def detect(self, image_bgr: np.ndarray, camera_height_m: float, focal_px: float) -> Boxes:
+        self.given.append((image_bgr.shape[1], focal_px))
+        return Boxes.empty()
+
+
+@pytest.mark.parametrize(
+    ("centre_scale", "shrunk_by"),
+    [
+        (0.1, 0.4),  # the centre model shrinks further: it takes the frame as the tiles do
+        (0.9, 1.0),  # it would need more than the shrunk frame holds: the frame as it came
+    ],
+)
+def test_the_centre_model_gets_the_shrunk_frame_only_where_it_shrinks_further(centre_scale: float, shrunk_by: float) -> None:
+    frame = cv2.resize(_frame([]), (880, 880))  # a circle of 400 px: the 128 px tiles shrink it by 0.4
+    centre = CentreModel(centre_scale)
+    RimTileDetector(UprightBlobs(), centre=centre).detect_rotated(frame, 3.0, 2 * FOCAL, (439.5, 439.5))  # type: ignore[arg-type]
+    [(width, focal)] = centre.given
+    assert focal == pytest.approx(2 * FOCAL * shrunk_by) and width == pytest.approx(2 * 0.55 * 2 * RADIUS * shrunk_by, abs=3)
