@@ -88,7 +88,8 @@ def test_constraints_leave_out_the_project_and_local_paths() -> None:
 
 def test_license_and_third_party_notices() -> None:
     assert "Apache License" in (ROOT / "LICENSE").read_text()[:200]
-    assert tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["license"] == {"text": "Apache-2.0"}
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    assert project["license"] == "Apache-2.0" and project["license-files"] == ["LICENSE", "NOTICE"]  # SPDX, in the wheel
     notice = (ROOT / "NOTICE").read_text()
     for path in re.findall(r"shared/bevflow/\S+?\.(?:onnx|txt|md)\b", notice):
         assert (ROOT / path).is_file(), f"NOTICE names {path}, which does not exist"
