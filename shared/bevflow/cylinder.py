@@ -528,10 +528,10 @@ def fit_cylinders_reference(
     candidate with plain loops and no table: the oracle the fast path is tested against."""
     listed = [[float(v) for v in box] for box in boxes.xyxy]
     touching = _touching_reference(camera, listed, grid)
-    rows = [_fit_one_reference(camera, box, grid, touches) for box, touches in zip(listed, touching)]
+    rows = [_fit_one_reference(camera, box, grid, touches) for box, touches in zip(listed, touching, strict=True)]
     if not rows:
         return Cylinders.empty()
-    x, y, height, radius, score, occluded = (np.array(column) for column in zip(*rows))
+    x, y, height, radius, score, occluded = (np.array(column) for column in zip(*rows, strict=True))
     return Cylinders(xy=np.stack([x, y], axis=1), height=height, radius=radius,
                      camera=np.full(len(rows), camera_index), score=score, occluded=occluded)
 
@@ -590,7 +590,7 @@ def _fit_one_reference(camera: Camera, box: list[float], grid: CylinderGrid, tou
     total = sum(weights)
     if total <= 0:
         return failed
-    fit = [sum(w * c[k] for w, c in zip(weights, candidates)) / total for k in (1, 2, 3, 4)]
+    fit = [sum(w * c[k] for w, c in zip(weights, candidates, strict=True)) / total for k in (1, 2, 3, 4)]
     score = max(0.0 if math.isnan(c[0]) else c[0] for c in candidates)
 
     rect = _cuboid_rect_one(camera, fit[0], fit[1], fit[2], fit[3], grid.top_ratio)

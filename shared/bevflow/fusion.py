@@ -455,7 +455,7 @@ def _join(labels: IntArray, camera: IntArray, candidates: list[IntArray]) -> Int
     prior's views mostly group as their prior's do), so plain Python over them is cheapest."""
     involved = np.flatnonzero(np.isin(labels, np.concatenate(candidates)))
     members: dict[int, list[int]] = {}
-    for row, group in zip(involved.tolist(), labels[involved].tolist()):
+    for row, group in zip(involved.tolist(), labels[involved].tolist(), strict=True):
         members.setdefault(group, []).append(row)
     root = {group: group for group in members}
     joined = {group: list(rows) for group, rows in members.items()}

@@ -143,7 +143,7 @@ class CameraCylinders(Message):
             xx, xy, yy = cyl.covariance[:, 0, 0], cyl.covariance[:, 0, 1], cyl.covariance[:, 1, 1]
             with np.errstate(invalid="ignore", over="ignore"):
                 usable = np.isfinite(cyl.covariance).all(axis=(1, 2)) & (xx > 0) & (yy > 0) & (xx * yy > xy * xy)
-            covariance = [(a, b, c) if ok else None for a, b, c, ok in zip(xx.tolist(), xy.tolist(), yy.tolist(), usable)]
+            covariance = [(a, b, c) if ok else None for a, b, c, ok in zip(xx.tolist(), xy.tolist(), yy.tolist(), usable, strict=True)]
         return cls(
             camera=camera,
             seq=seq,

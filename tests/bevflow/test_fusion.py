@@ -411,7 +411,7 @@ def test_a_hundred_cameras_and_a_crowd(mode):
     # every view of one person lands on one fused row, and no row mixes people
     rows = fusion.assignment
     truth = person[order]
-    assert len(set(zip(truth.tolist(), rows.tolist()))) == len(people)
+    assert len(set(zip(truth.tolist(), rows.tolist(), strict=True))) == len(people)
     np.testing.assert_array_equal(np.sort(fusion.n_views), np.sort(seen_by.sum(axis=1)))
     fused_for = np.empty(len(people), dtype=np.int64)
     fused_for[truth] = rows
@@ -458,7 +458,7 @@ def greedy_cliques(xy, camera, cov, distance_m=0.45, gate_chi2=9.21, max_gate_m=
     group = list(range(n))
     members = {k: {k} for k in range(n)}
     i, j = np.nonzero(np.triu(linked, 1))
-    for a, b in sorted(zip(i.tolist(), j.tolist()), key=lambda p: depth[p]):
+    for a, b in sorted(zip(i.tolist(), j.tolist(), strict=True), key=lambda p: depth[p]):
         ga, gb = group[a], group[b]
         if ga == gb or {camera[k] for k in members[ga]} & {camera[k] for k in members[gb]}:
             continue

@@ -261,7 +261,7 @@ def chaos(tmp_path_factory: pytest.TempPathFactory):
         forged_ns = forge(session, keys)
         time.sleep(2.0)
         health = get_json(f"{base}/api/health")
-        for restart, following in zip(restarts, [*restarts[1:], None]):
+        for restart, following in zip(restarts, [*restarts[1:], None], strict=True):
             until = following.killed_ns if following else 2**63
             restart.recovered_s = recovery(poller.samples, observer, restart.up_ns, until)
         events_before = observer.latest_events()

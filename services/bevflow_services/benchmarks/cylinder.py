@@ -95,7 +95,7 @@ def hide_lower_part(camera: Camera, rects: np.ndarray, fraction: float) -> np.nd
     """Cut the side of each box nearest the nadir, as an obstacle in front of the legs would."""
     out = rects.copy()
     direction = (rects[:, :2] + rects[:, 2:]) / 2.0 - camera.nadir_pixel()
-    for row, (dx, dy) in zip(out, direction):
+    for row, (dx, dy) in zip(out, direction, strict=True):
         axis = 0 if abs(dx) > abs(dy) else 1
         cut = fraction * (row[axis + 2] - row[axis])
         if (dx if axis == 0 else dy) > 0:

@@ -140,7 +140,7 @@ def _slope(samples: list[tuple[float, int]]) -> float:
     m = [b / MiB for _, b in samples]
     mean_t, mean_m = sum(t) / len(t), sum(m) / len(m)
     spread = sum((x - mean_t) ** 2 for x in t)
-    return round(sum((x - mean_t) * (y - mean_m) for x, y in zip(t, m)) / spread * 60, 2) if spread > 0 else math.nan
+    return round(sum((x - mean_t) * (y - mean_m) for x, y in zip(t, m, strict=True)) / spread * 60, 2) if spread > 0 else math.nan
 
 
 def soak(minutes: float, cameras: int, people: int | None = None, sample_every_s: float = 5.0,

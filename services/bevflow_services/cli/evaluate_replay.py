@@ -88,7 +88,7 @@ def parse_area(text: str | None, site: Site) -> FloorArea | Everywhere:
 
 def write_tracks(path: Path, tracks: tuple[tuple[int, TrackTable], ...]) -> None:
     lines = [f"{frame},{i},{x:.4f},{y:.4f}" for frame, table in tracks
-             for i, (x, y) in zip(table.id.tolist(), table.xy.tolist())]
+             for i, (x, y) in zip(table.id.tolist(), table.xy.tolist(), strict=True)]
     try:
         path.write_text("".join(line + "\n" for line in lines))
     except OSError as exc:

@@ -188,7 +188,7 @@ class IncidentTracker:
         summed = np.stack([np.bincount(which, weights=xy[people, k]) for k in (0, 1)], axis=1)
         centre = summed / np.bincount(which)[:, None]
         return [_Group(frozenset(members), (cx, cy), d)
-                for members, (cx, cy), d in zip(components, centre.tolist(), closest.tolist())]
+                for members, (cx, cy), d in zip(components, centre.tolist(), closest.tolist(), strict=True)]
 
     def _follow(self, groups: list[_Group], t: int) -> None:
         """Give each group its candidate (continued, merged or new), largest groups first."""

@@ -249,7 +249,7 @@ def evaluate_detection(
     counts = np.zeros((n_cam, 9), dtype=np.int64)  # the CameraCounts fields from boxes to outside_area
     for frame in selected:
         per_camera = []
-        for i, (camera, view, noisy) in enumerate(zip(cameras, frame.views, noisy_detections(dataset, frame, noise, seed))):
+        for i, (camera, view, noisy) in enumerate(zip(cameras, frame.views, noisy_detections(dataset, frame, noise, seed), strict=True)):
             clipped = 0
             if clip_to_image:
                 noisy, clipped = clip_boxes_to_image(noisy, camera.image_size)

@@ -396,7 +396,7 @@ def run_suite(
         # Longest presets first, so the last one to finish is short.
         order = sorted(range(len(jobs)), key=lambda k: -_cost(presets[k]))
         with ProcessPoolExecutor(max_workers=min(processes, len(jobs))) as pool:
-            done = dict(zip(order, pool.map(_evaluate_preset, [jobs[k] for k in order])))
+            done = dict(zip(order, pool.map(_evaluate_preset, [jobs[k] for k in order]), strict=True))
         per_preset = [done[k] for k in range(len(jobs))]
     else:
         per_preset = [_evaluate_preset(job) for job in jobs]

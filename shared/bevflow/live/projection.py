@@ -42,7 +42,7 @@ class CameraProjection:
         self.site = site
         self.method = method
         self._cameras = [site.camera(c) for c in site.camera_ids]  # by index, as fusion takes them
-        reach = [fit_reach_m(float(cam.center[2]), c.reporting_radius_m) for cam, c in zip(self._cameras, site.cameras)]
+        reach = [fit_reach_m(float(cam.center[2]), c.reporting_radius_m) for cam, c in zip(self._cameras, site.cameras, strict=True)]
         self._grids = [CylinderGrid() if r is None else CylinderGrid(max_range_m=r) for r in reach]
 
     def project(self, camera_id: str, boxes: Boxes) -> Cylinders:

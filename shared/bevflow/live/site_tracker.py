@@ -88,6 +88,7 @@ class SiteTracker:
         person = person_camera // count
         names = [self.camera_ids[c] for c in (person_camera % count).tolist()]
         starts = np.flatnonzero(np.diff(person, prepend=-1)).tolist()  # sorted: each person's run
-        for p, a, b in zip(person[starts].tolist(), starts, starts[1:] + [len(names)]):
+        ends = starts[1:] + [len(names)] if starts else []
+        for p, a, b in zip(person[starts].tolist(), starts, ends, strict=True):
             out[p] = names[a:b]
         return out

@@ -71,9 +71,9 @@ def score_hota(gt_frames: Sequence[Frame], hyp_frames: Sequence[Frame], zero_dis
     gt_ids, gt_xy = _dense([f[0] for f in gt_frames], [as_points(f[1], "gt xy") for f in gt_frames])
     hyp_xy_raw = [as_points(f[1], "hyp xy") for f in hyp_frames]
     placed = [np.isfinite(xy).all(axis=1) for xy in hyp_xy_raw]
-    hyp_ids, hyp_xy = _dense([np.asarray(f[0]).reshape(-1)[p] for f, p in zip(hyp_frames, placed)],
-                             [xy[p] for xy, p in zip(hyp_xy_raw, placed)])
-    similarity = [_similarity(g, h, zero_distance_m) for g, h in zip(gt_xy, hyp_xy)]
+    hyp_ids, hyp_xy = _dense([np.asarray(f[0]).reshape(-1)[p] for f, p in zip(hyp_frames, placed, strict=True)],
+                             [xy[p] for xy, p in zip(hyp_xy_raw, placed, strict=True)])
+    similarity = [_similarity(g, h, zero_distance_m) for g, h in zip(gt_xy, hyp_xy, strict=True)]
     n_gt, n_hyp = int(sum(map(len, gt_ids))), int(sum(map(len, hyp_ids)))
     if n_gt == 0 or n_hyp == 0:  # TrackEval's early returns: nothing to match
         zeros = np.zeros(len(ALPHAS))
@@ -85,7 +85,7 @@ def score_hota(gt_frames: Sequence[Frame], hyp_frames: Sequence[Frame], zero_dis
 
 def _dense(ids: list[np.ndarray], xy: list[FloatArray]) -> tuple[list[IntArray], list[FloatArray]]:
     """Ids renumbered 0..n-1 over the sequence; checks one position per id and no id twice."""
-    for k, (i, p) in enumerate(zip(ids, xy)):
+    for k, (i, p) in enumerate(zip(ids, xy, strict=True)):
         if len(np.asarray(i).reshape(-1)) != len(p):
             raise ValueError(f"frame {k}: {len(np.asarray(i).reshape(-1))} ids but {len(p)} positions")
         if len(np.unique(i)) != len(np.asarray(i).reshape(-1)):
@@ -109,7 +109,7 @@ def _global_alignment(gt_ids: list[IntArray], hyp_ids: list[IntArray], similarit
     n_h = 1 + max((int(h.max()) for h in hyp_ids if len(h)), default=-1)
     potential = np.zeros((n_g, n_h))
     gt_count, hyp_count = np.zeros(n_g), np.zeros(n_h)
-    for g, h, s in zip(gt_ids, hyp_ids, similarity):
+    for g, h, s in zip(gt_ids, hyp_ids, similarity, strict=True):
         denominator = s.sum(0)[None, :] + s.sum(1)[:, None] - s
         share = np.zeros_like(s)
         ok = denominator > _EPS
@@ -127,7 +127,7 @@ def _match_frames(gt_ids: list[IntArray], hyp_ids: list[IntArray], similarity: l
     matches = np.zeros((n_a, *alignment.shape))
     gt_count = np.bincount(np.concatenate(gt_ids), minlength=alignment.shape[0])
     hyp_count = np.bincount(np.concatenate(hyp_ids), minlength=alignment.shape[1])
-    for g, h, s in zip(gt_ids, hyp_ids, similarity):
+    for g, h, s in zip(gt_ids, hyp_ids, similarity, strict=True):
         if len(g) == 0 or len(h) == 0:
             fp += len(h)
             fn += len(g)

@@ -110,7 +110,7 @@ def _bridge(
     position at ``now`` into ``xy``, interpolated in time between ``before`` and ``after``."""
     earlier = before.tracks
     matched_rows = np.flatnonzero(earlier.detection >= 0)
-    row_of = dict(zip(earlier.key[matched_rows].tolist(), matched_rows.tolist()))
+    row_of = dict(zip(earlier.key[matched_rows].tolist(), matched_rows.tolist(), strict=True))
     span = after.time_s - before.time_s
     w = (now.time_s - before.time_s) / span if span > 0 else 0.5
     bridged = np.zeros(len(missed), dtype=bool)

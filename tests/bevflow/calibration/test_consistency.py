@@ -27,7 +27,7 @@ IDS = ["west", "mid", "east"]
 def test_fusion_pairs_give_one_sample_per_pair_of_members() -> None:
     seen = Cylinders(xy=[[2.0, 0.0], [2.2, 0.1], [6.0, 0.0], [6.1, 0.0], [9.0, 9.0]], camera=[0, 1, 1, 2, 2])
     samples = pair_offsets(seen, fuse_cylinders(seen, CAMS))
-    pairs = sorted(zip(samples.a.tolist(), samples.b.tolist(), np.round(samples.offset, 6).tolist()))
+    pairs = sorted(zip(samples.a.tolist(), samples.b.tolist(), np.round(samples.offset, 6).tolist(), strict=True))
     assert pairs == [(0, 1, [-0.2, -0.1]), (1, 2, [-0.1, 0.0])]
     np.testing.assert_allclose(samples.position[samples.a == 0], [[2.1, 0.05]])
 
@@ -51,7 +51,7 @@ def test_fusion_pairs_can_leave_out_head_rebuilt_cylinders() -> None:
 )
 def test_isolated_pairs(xy: list, camera: list, expected: list) -> None:
     samples = isolated_pairs(Cylinders(xy=xy, camera=camera), gate_m=1.0)
-    assert sorted(zip(samples.a.tolist(), samples.b.tolist())) == expected
+    assert sorted(zip(samples.a.tolist(), samples.b.tolist(), strict=True)) == expected
 
 
 def test_summary_reports_median_offset_and_spread() -> None:

@@ -34,7 +34,7 @@ CONFIG = DriftConfig(warmup_s=60.0, window_s=45.0, min_samples=30, shift_m=0.10)
 
 
 def site_cameras(size: int = 640) -> list[Camera]:
-    return [FisheyeCamera.looking_down((x, 4.0, HEIGHT_M), (size, size), 185.0, yaw) for x, yaw in zip(XS, YAWS)]
+    return [FisheyeCamera.looking_down((x, 4.0, HEIGHT_M), (size, size), 185.0, yaw) for x, yaw in zip(XS, YAWS, strict=True)]
 
 
 def turned(camera: Camera, yaw: float, pitch_deg: float, yaw_deg: float) -> Camera:
@@ -54,7 +54,7 @@ def scene(frames: int, seed: int, fps: float = FPS) -> Scene:
 def crowd(frames: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Every frame's people at once: frame index, visit id and feet (rows of all frames)."""
     rows = [(np.full(len(f), f.index), f.person_ids, f.feet_xy) for f in scene(frames, seed)]
-    return tuple(np.concatenate(column) for column in zip(*rows))  # type: ignore[return-value]
+    return tuple(np.concatenate(column) for column in zip(*rows, strict=True))  # type: ignore[return-value]
 
 
 def feet_estimates(true: list[Camera], site: list[Camera], frames: int, change: int, seed: int) -> list[Cylinders]:

@@ -65,7 +65,7 @@ def write_fake_wildtrack(root: Path) -> Path:
     cameras = fake_cameras()
     for sub in ("extrinsic", "intrinsic_zero"):
         (root / "calibrations" / sub).mkdir(parents=True, exist_ok=True)
-    for name, cam in zip(FAKE_CAMERAS, cameras):
+    for name, cam in zip(FAKE_CAMERAS, cameras, strict=True):
         rvec = " ".join(repr(float(v)) for v in cv2.Rodrigues(cam.R)[0].ravel())
         tvec = " ".join(repr(float(v)) for v in cam.t * 100.0)
         (root / "calibrations" / "extrinsic" / f"extr_{name}.xml").write_text(
@@ -86,7 +86,7 @@ def write_fake_wildtrack(root: Path) -> Path:
             views = []
             for v in range(7):
                 box = person_box(cameras[v], xy) if v < 2 and (pid, v) != HIDDEN else [-1, -1, -1, -1]
-                views.append(dict(zip(("xmin", "ymin", "xmax", "ymax"), box), viewNum=v))
+                views.append(dict(zip(("xmin", "ymin", "xmax", "ymax"), box, strict=True), viewNum=v))
             records.append({"personID": pid, "positionID": pos, "views": views})
         (root / "annotations_positions" / f"{frame:08d}.json").write_text(json.dumps(records))
     return root
@@ -115,7 +115,7 @@ def test_loads_cameras_in_view_order_with_translation_in_metres(fake_root: Path)
     ds = load_wildtrack(fake_root)
     assert ds.camera_ids == ("CVLab1", "CVLab2")
     assert ds.view_numbers == (0, 1)
-    for cam, (position, _) in zip(ds.cameras, FAKE_CAMERAS.values()):
+    for cam, (position, _) in zip(ds.cameras, FAKE_CAMERAS.values(), strict=True):
         np.testing.assert_allclose(cam.center, position, atol=1e-6)  # written in cm, read in m
         np.testing.assert_allclose(cam.K, K)
         assert cam.image_size == (1920, 1080)
@@ -139,7 +139,7 @@ def test_frames_sorted_with_ids_feet_and_boxes(fake_root: Path) -> None:
 def test_ground_truth_feet_project_onto_box_bottoms(fake_root: Path) -> None:
     ds = load_wildtrack(fake_root)
     for frame in ds.frames:
-        for cam, view in zip(ds.cameras, frame.views):
+        for cam, view in zip(ds.cameras, frame.views, strict=True):
             rows = [frame.person_ids.tolist().index(p) for p in view.person_ids]
             uv = cam.project(np.c_[frame.feet_xy[rows], np.zeros(len(rows))])
             b = view.boxes

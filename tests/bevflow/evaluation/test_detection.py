@@ -70,7 +70,7 @@ def test_a_slice_scores_exactly_its_frames_of_the_full_run(dataset: WildtrackDat
     for field in ("tp", "fp", "fn"):
         assert getattr(full.scores, field) == getattr(head.scores, field) + getattr(tail.scores, field)
     assert [c.detections for c in full.per_camera] == [
-        a.detections + b.detections for a, b in zip(head.per_camera, tail.per_camera)
+        a.detections + b.detections for a, b in zip(head.per_camera, tail.per_camera, strict=True)
     ]
 
 

@@ -21,7 +21,7 @@ def write_recording(dataset: WildtrackDataset, folder: Path) -> tuple[Path, Path
     annotated box (confidence 1, as the noise model gives them) and the floor truth, its annotated
     frames numbered 0, 1, 2, ..."""
     cameras = []
-    for name, cam in zip(dataset.camera_ids, dataset.cameras):
+    for name, cam in zip(dataset.camera_ids, dataset.cameras, strict=True):
         K = cam.K
         cameras.append({
             "id": name, "model": "pinhole", "image_size": list(cam.image_size),
@@ -36,9 +36,9 @@ def write_recording(dataset: WildtrackDataset, folder: Path) -> tuple[Path, Path
     rows: dict[str, list[str]] = {name: [] for name in dataset.camera_ids}
     truth = []
     for k, frame in enumerate(dataset.frames):
-        for name, view in zip(dataset.camera_ids, frame.views):
+        for name, view in zip(dataset.camera_ids, frame.views, strict=True):
             rows[name] += [f"{k},-1,{x0!r},{y0!r},{x1 - x0!r},{y1 - y0!r},1.0,-1,-1,-1" for x0, y0, x1, y1 in view.boxes.xyxy.tolist()]
-        truth += [f"{k},{i},{x!r},{y!r}" for i, (x, y) in zip(frame.person_ids.tolist(), frame.feet_xy.tolist())]
+        truth += [f"{k},{i},{x!r},{y!r}" for i, (x, y) in zip(frame.person_ids.tolist(), frame.feet_xy.tolist(), strict=True)]
     for name, lines in rows.items():
         (detections / f"{name}.txt").write_text("\n".join(lines) + "\n")
     (folder / "truth.txt").write_text("\n".join(truth) + "\n")

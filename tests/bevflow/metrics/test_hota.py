@@ -108,7 +108,7 @@ def trackeval_hota(gt: list, hyp: list, zero_distance_m: float) -> dict[str, flo
         "gt_ids": [np.searchsorted(gt_unique, g[0]) for g in gt],
         "tracker_ids": [np.searchsorted(hyp_unique, h[0]) for h in hyp],
         "similarity_scores": [_BaseDataset._calculate_euclidean_similarity(g[1], h[1], zero_distance_m)
-                              for g, h in zip(gt, hyp)],
+                              for g, h in zip(gt, hyp, strict=True)],
         "num_gt_ids": len(gt_unique), "num_tracker_ids": len(hyp_unique),
         "num_gt_dets": sum(len(g[0]) for g in gt), "num_tracker_dets": sum(len(h[0]) for h in hyp),
         "num_timesteps": len(gt),

@@ -49,7 +49,7 @@ def test_drop_removes_boxes_with_the_given_probability(drop: float) -> None:
 @pytest.mark.parametrize("mean", [0.0, 0.5, 3.0])
 def test_false_positives_are_poisson_inside_the_image_with_real_box_sizes(mean: float) -> None:
     boxes = spread_boxes(5)
-    sizes = {(round(w, 6), round(h, 6)) for w, h in zip(boxes.width, boxes.height)}
+    sizes = {(round(w, 6), round(h, 6)) for w, h in zip(boxes.width, boxes.height, strict=True)}
     counts = []
     for frame in range(1000):
         out = apply_detector_noise(boxes, DetectorNoise(false_positives=mean, truncation=False), view_rng(0, frame, 1), IMAGE)
@@ -57,7 +57,7 @@ def test_false_positives_are_poisson_inside_the_image_with_real_box_sizes(mean: 
         counts.append(len(fake))
         assert np.all(out.source[:5] == np.arange(5))
         assert np.all((fake.xyxy[:, :2] >= 0) & (fake.xyxy[:, 2:] <= IMAGE))
-        assert {(round(w, 6), round(h, 6)) for w, h in zip(fake.width, fake.height)} <= sizes
+        assert {(round(w, 6), round(h, 6)) for w, h in zip(fake.width, fake.height, strict=True)} <= sizes
     assert abs(np.mean(counts) - mean) <= 4 * np.sqrt(mean / 1000) + 1e-12
     assert abs(np.var(counts) - mean) <= 0.2 * mean + 1e-12  # Poisson: variance = mean
 

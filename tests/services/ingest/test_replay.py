@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import threading
 import time
 from pathlib import Path
@@ -94,7 +95,7 @@ def test_every_camera_reports_every_frame_in_order(recording: Path) -> None:
     assert [len(m.boxes) for m in by_camera["b"]] == [1, 0, 0]  # nothing in frame 2, frame 3's box too weak
     assert by_camera["a"][0].boxes == [(100.0, 100.0, 140.0, 190.0)] and by_camera["a"][0].confidence == [0.9]
     times = [m.capture_ns for m in by_camera["a"]]
-    assert all(later - earlier >= 40_000_000 for earlier, later in zip(times, times[1:]))  # 20 fps: 50 ms apart
+    assert all(later - earlier >= 40_000_000 for earlier, later in itertools.pairwise(times))  # 20 fps: 50 ms apart
 
 
 def test_a_loop_starts_again_and_keeps_counting(recording: Path) -> None:

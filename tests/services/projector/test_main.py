@@ -86,7 +86,7 @@ def test_fitting_only_near_the_reporting_radius_keeps_exactly_what_a_full_fit_ke
     distance, angle, low = rng.uniform(0.0, 9.0, 90), rng.uniform(0, 2 * np.pi, 90), rng.choice([0.0, 0.0, 1.3], 90)
     edge = (radius or 3.0) + 0.1  # and four seen from the shoulders up just inside the reporting radius
     distance, angle, low = np.r_[distance, [edge] * 4], np.r_[angle, 0.0, 1.0, 2.0, 3.0], np.r_[low, [1.3] * 4]
-    boxes = [box_of_part(camera, (d * np.cos(a), d * np.sin(a)), z, 1.7) for d, a, z in zip(distance, angle, low)]
+    boxes = [box_of_part(camera, (d * np.cos(a), d * np.sin(a)), z, 1.7) for d, a, z in zip(distance, angle, low, strict=True)]
     message = Detections2D(camera="a", seq=1, capture_ns=5, boxes=boxes)
     full = fit_cylinders(camera, message.to_boxes(), camera_index=0)
     reporting = site.cameras[0].reporting_radius_m
