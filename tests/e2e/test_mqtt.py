@@ -17,12 +17,12 @@ from pathlib import Path
 import paho.mqtt.client as mqtt
 import pytest
 
-from bevflow.schemas import Event, OpenAlerts
+from bevflow.schemas import Event
 
 from bevflow_services import bus
 from bevflow_services.launcher import free_port
 from bevflow_services.mqtt.broker import RECONNECT_S
-from tests.e2e.renewals import renew_until
+from tests.e2e.renewals import forge_one_and_renew_another
 from tests.services.gateway.feed import SITE_YAML, T0, S, incident, occupancy, over_capacity
 
 pytestmark = pytest.mark.e2e
@@ -170,29 +170,18 @@ def test_an_open_alert_nobody_renews_is_published_again_ended_and_a_renewed_one_
     service = start_service(tmp_path, hub, broker, "--alert-lease-s", str(SHORT_LEASE_S))
     receiver = Receiver(broker.port)
     session = bus.open_session(bus.BusConfig(connect=(hub,)))
-    keys = bus.Keys("hall")
-    events = bus.Publication(session, keys.events, bus.JsonCodec(Event, "Event"))
-    renewals = bus.Publication(session, keys.open_alerts, bus.JsonCodec(OpenAlerts))
 
     def explain() -> str:
         return f"{receiver.alerts()}\n{(tmp_path / 'mqtt.log').read_text()}"
 
     try:
-        assert events.wait_for_subscribers(TIMEOUT_S) and renewals.wait_for_subscribers(TIMEOUT_S), (
-            (tmp_path / "mqtt.log").read_text())
-        events.put(incident("forged", T0))
-        events.put(over_capacity("renewed", T0))
-        renew_until(renewals, ["renewed"], lambda: len(receiver.alerts()) >= 3, TIMEOUT_S, explain)
-        quiet_until = time.monotonic() + 2 * SHORT_LEASE_S  # the renewed one outlives another lease or two
-        renew_until(renewals, ["renewed"], lambda: time.monotonic() > quiet_until, TIMEOUT_S, explain)
+        forge_one_and_renew_another(session, lambda: len(receiver.alerts()), SHORT_LEASE_S, TIMEOUT_S, explain)
         got = [(topic, m["id"], m["active"], m["end_ns"]) for topic, m in receiver.alerts()]
         assert got[:2] == [("bevflow/hall/alerts/gate/distance_incident", "forged", True, None),
                            ("bevflow/hall/alerts/gate/over_capacity", "renewed", True, None)]
         assert [(t, i, a) for t, i, a, _ in got[2:]] == [("bevflow/hall/alerts/gate/distance_incident", "forged", False)]
         assert got[2][3] > T0  # ended when it arrived, on the service's clock
     finally:
-        events.close()
-        renewals.close()
         session.close()
         receiver.close()
         service.terminate()

@@ -16,12 +16,12 @@ from pathlib import Path
 
 import pytest
 
-from bevflow.schemas import Event, OpenAlerts
+from bevflow.schemas import Event
 
 from bevflow_services import bus
 from bevflow_services.launcher import free_port
 from bevflow_services.webhook.main import RETRY_S
-from tests.e2e.renewals import renew_until
+from tests.e2e.renewals import forge_one_and_renew_another
 from tests.services.gateway.feed import SITE_YAML, T0, S, incident, over_capacity
 
 pytestmark = pytest.mark.e2e
@@ -127,29 +127,18 @@ def test_an_open_alert_nobody_renews_is_posted_again_ended_and_a_renewed_one_is_
     hub = f"tcp/127.0.0.1:{free_port()}"
     service = start_service(tmp_path, hub, receiver, "--alert-lease-s", str(SHORT_LEASE_S))
     session = bus.open_session(bus.BusConfig(connect=(hub,)))
-    keys = bus.Keys("hall")
-    events = bus.Publication(session, keys.events, bus.JsonCodec(Event, "Event"))
-    renewals = bus.Publication(session, keys.open_alerts, bus.JsonCodec(OpenAlerts))
 
     def explain() -> str:
         return f"{receiver.bodies}\n{(tmp_path / 'webhook.log').read_text()}"
 
     try:
-        assert events.wait_for_subscribers(TIMEOUT_S) and renewals.wait_for_subscribers(TIMEOUT_S), (
-            (tmp_path / "webhook.log").read_text())
-        events.put(incident("forged", T0))
-        events.put(over_capacity("renewed", T0))
-        renew_until(renewals, ["renewed"], lambda: len(receiver.bodies) >= 3, TIMEOUT_S, explain)
-        quiet_until = time.monotonic() + 2 * SHORT_LEASE_S  # the renewed one outlives another lease or two
-        renew_until(renewals, ["renewed"], lambda: time.monotonic() > quiet_until, TIMEOUT_S, explain)
+        forge_one_and_renew_another(session, lambda: len(receiver.bodies), SHORT_LEASE_S, TIMEOUT_S, explain)
         with receiver.lock:
             got = [(b["id"], b["active"], b["end_ns"]) for b in receiver.bodies]
         assert got[:2] == [("forged", True, None), ("renewed", True, None)]
         assert [(i, a) for i, a, _ in got[2:]] == [("forged", False)]
         assert got[2][2] > T0  # ended when it arrived, on the service's clock
     finally:
-        events.close()
-        renewals.close()
         session.close()
         service.terminate()
         service.wait(10)
