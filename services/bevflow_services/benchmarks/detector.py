@@ -118,6 +118,30 @@ def bench_detector(
     return {"available": True, "reason": None, "rows": rows}
 
 
+def bench_int8(height_m: float = 5.5, threads: int = 2, rounds: int = 10, calls: int = 3,
+               make_detector: Callable[[Path], Detector] | None = None) -> dict:
+    """The general model against its INT8 copy on one camera's frame, timed in alternating rounds
+    of ``calls`` calls each so that both see the same machine load: ms per frame (median over
+    every call) and ``speedup`` = float32 ms / INT8 ms (above 1: INT8 pays on this CPU).
+    ``make_detector(path)`` overrides how a model is loaded (tests pass a stand-in)."""
+    from bevflow.detect.runtime import DEFAULT_MODEL, INT8_MODEL, Detector
+
+    if not INT8_MODEL.is_file() or not DEFAULT_MODEL.is_file():
+        return {"available": False, "reason": f"no {INT8_MODEL.name} shipped beside {DEFAULT_MODEL.name}"}
+    load = make_detector or (lambda path: Detector(path, threads=threads))
+    frame, focal = frame_for(height_m)
+    detectors = {"float32": load(DEFAULT_MODEL), "int8": load(INT8_MODEL)}
+    times: dict[str, list[float]] = {name: [] for name in detectors}
+    for detector in detectors.values():
+        detector.detect(frame, height_m, focal)  # warm-up
+    for _ in range(rounds):
+        for name, detector in detectors.items():
+            times[name].extend(time_calls(functools.partial(detector.detect, frame, height_m, focal), calls).wall_s)
+    ms = {name: percentile([t * 1e3 for t in values], 50) for name, values in times.items()}
+    return {"available": True, "height_m": height_m, "threads": threads, "ms_p50": {k: round(v, 2) for k, v in ms.items()},
+            "speedup": round(ms["float32"] / ms["int8"], 3) if ms["int8"] > 0 else None}
+
+
 def camera_sized(detector: Detector | RimTileDetector, frame: np.ndarray, focal: float) -> tuple[np.ndarray, float]:
     """``frame`` and its focal length, enlarged to ``REAL_FRAME_PX`` for the rim tiles when it is
     smaller (module docstring)."""

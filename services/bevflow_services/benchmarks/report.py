@@ -136,8 +136,14 @@ def _tracking(part: dict) -> list[str]:
 
 
 def _detector(part: dict) -> list[str]:
-    return [f"{r['height_m']:.1f} m, {r['threads']} threads: frame {r['frame']} -> input {r['input']}: "
-            f"{_number(r['ms_p50'])} ms p50, {_number(r['ms_p90'])} ms p90, {r['boxes']} boxes" for r in part["rows"]]
+    lines = [f"{r['height_m']:.1f} m, {r['threads']} threads: frame {r['frame']} -> input {r['input']}: "
+             f"{_number(r['ms_p50'])} ms p50, {_number(r['ms_p90'])} ms p90, {r['boxes']} boxes" for r in part["rows"]]
+    int8 = part.get("int8", {})
+    if int8.get("available"):
+        ms = int8["ms_p50"]
+        lines.append(f"general model at {int8['height_m']:.1f} m, {int8['threads']} threads, alternating: float32 "
+                     f"{_number(ms['float32'])} ms, INT8 {_number(ms['int8'])} ms p50 (speedup {_number(int8['speedup'])})")
+    return lines
 
 
 def _live(part: dict) -> list[str]:

@@ -26,6 +26,8 @@ steps, each resumable (run the same command again to continue):
                                                                          fine-tune the shipped model on your frames
   bevflow train-detector export --checkpoint runs/a/checkpoint.pt --out model.onnx
   bevflow evaluate --detector --model model.onnx --images data/eval --annotations data/eval/annotations.json
+  bevflow train-detector quantize --model model.onnx --frames data/cal/annotations.json --out model-int8.onnx
+                                                                         an INT8 copy, calibrated on other held-out frames
 
 Rendered crops are drawn at the detector's input scale (a person at the image centre ~20 px).
 COCO images are scaled from their 'camera_height_m' and 'focal_px' keys when present, else by --scale.
@@ -82,6 +84,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     export.add_argument("--checkpoint", type=Path, required=True, metavar="FILE", help="checkpoint.pt from 'train'")
     export.add_argument("--out", type=Path, required=True, metavar="FILE", help="the .onnx file to write")
     export.set_defaults(func=_export)
+    quantize = sub.add_parser("quantize", help="write an INT8 copy of a model, calibrated on frames (needs onnx)")
+    quantize.add_argument("--model", type=Path, required=True, metavar="FILE", help="the .onnx model to quantise")
+    quantize.add_argument("--frames", type=Path, required=True, metavar="FILE",
+                          help="COCO JSON of calibration frames (e.g. from render-eval with its own seed)")
+    quantize.add_argument("--count", type=int, default=32, metavar="N", help="frames to calibrate on, the first N (default 32)")
+    quantize.add_argument("--out", type=Path, required=True, metavar="FILE", help="the INT8 .onnx file to write")
+    quantize.set_defaults(func=_quantize)
 
 
 def _scene_options(parser: argparse.ArgumentParser) -> None:
@@ -172,6 +181,21 @@ def _export(args: argparse.Namespace) -> int:
     model, zoom = load_checkpoint(args.checkpoint)
     out = export_onnx(model, args.out, zoom=zoom)
     print(json.dumps({"model": str(out), "bytes": out.stat().st_size, "zoom": zoom}))
+    return 0
+
+
+def _quantize(args: argparse.Namespace) -> int:
+    from bevflow.detect.coco import CocoError, read_coco
+    from bevflow.training.quantize import quantize_detector  # onnx: the 'train' extra
+
+    if not args.model.is_file():
+        raise UserError(f"--model {args.model}: no such model file")
+    try:
+        frames = read_coco(args.frames)[: _count(args.count, "--count")]
+    except CocoError as exc:
+        raise UserError(str(exc)) from None
+    out = quantize_detector(args.model, frames, args.out)
+    print(json.dumps({"model": str(out), "bytes": out.stat().st_size, "frames": len(frames)}))
     return 0
 
 

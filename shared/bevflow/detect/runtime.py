@@ -329,6 +329,10 @@ class DetectorBank:
 # general model meets the suite's targets there (see the model card). The paper suite measures
 # this pair.
 LOW_CEILING_MODEL = DEFAULT_MODEL.with_name("bevflow-person-centernet-low.onnx")
+# The general model quantised to 8 bits (``bevflow.training.quantize``), as accurate on renders.
+# Not a default: on CPUs without 8-bit dot-product instructions it is slower than the original;
+# a site names it (``bevflow-person-centernet-int8``) where ``bevflow bench`` shows it faster.
+INT8_MODEL = DEFAULT_MODEL.with_name("bevflow-person-centernet-int8.onnx")
 RENDER_TRAINED_RANGES = (HeightRange(0.0, 5.0, LOW_CEILING_MODEL), HeightRange(5.0, 100.0, None))
 # What a site gets: under 5 m, where people are large in the frame and lie along its radius, the
 # rim tiles through a detector trained on real photographs, which finds people in real frames

@@ -9,6 +9,7 @@ from bevflow.detections import Boxes
 
 from bevflow_services.benchmarks import detector as detector_bench
 from bevflow_services.benchmarks.detector import bench_detector, lookup, unavailable_reason
+from bevflow_services.benchmarks.timing import Timing, time_calls
 
 
 def test_a_missing_model_is_named_and_nothing_is_timed(tmp_path: Path) -> None:
@@ -98,3 +99,45 @@ def test_rim_tiles_are_timed_on_a_frame_of_a_real_cameras_size(side: int, focal:
     detector = RimTileDetector(FixedTiles()) if tiles else FakeDetector(2)  # type: ignore[arg-type]
     frame, f = detector_bench.camera_sized(detector, np.zeros((side, side, 3), np.uint8), focal)  # type: ignore[arg-type]
     assert frame.shape == (sized, sized, 3) and f == pytest.approx(focal * sized / side)
+
+
+def test_int8_and_float32_are_timed_in_alternating_rounds(monkeypatch: pytest.MonkeyPatch) -> None:
+    from bevflow.detect.runtime import DEFAULT_MODEL, INT8_MODEL
+
+    from bevflow_services.benchmarks.detector import bench_int8
+
+    monkeypatch.setattr(detector_bench, "frame_for", lambda h: (np.zeros((64, 64, 3), np.uint8), 50.0))
+    calls: list[str] = []
+
+    class Named(FakeDetector):
+        def __init__(self, name: str) -> None:
+            super().__init__(threads=2)
+            self.name = name
+
+        def detect(self, image: np.ndarray, height: float, focal: float) -> Boxes:
+            calls.append(self.name)
+            return super().detect(image, height, focal)
+
+    seconds = {"float32": 0.004, "int8": 0.002}  # what the stand-in clock says each call took
+
+    def clocked(call, repeats: int) -> Timing:  # noqa: ANN001
+        timings = [time_calls(call, 1) for _ in range(repeats)]
+        return Timing([seconds[calls[-1]]] * repeats, [0.0] * repeats, timings[-1].result)
+
+    monkeypatch.setattr(detector_bench, "time_calls", clocked)
+    names = {DEFAULT_MODEL: "float32", INT8_MODEL: "int8"}
+    result = bench_int8(rounds=2, calls=3, make_detector=lambda path: Named(names[path]))  # type: ignore[arg-type,return-value]
+    assert result["available"]
+    assert calls == ["float32", "int8"] + ["float32"] * 3 + ["int8"] * 3 + ["float32"] * 3 + ["int8"] * 3  # warm-ups first
+    assert result["ms_p50"] == {"float32": 4.0, "int8": 2.0}
+    assert result["speedup"] == 2.0
+
+
+def test_int8_without_the_shipped_copy_says_so(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from bevflow.detect import runtime
+
+    from bevflow_services.benchmarks.detector import bench_int8
+
+    monkeypatch.setattr(runtime, "INT8_MODEL", tmp_path / "bevflow-person-centernet-int8.onnx")
+    result = bench_int8()
+    assert result == {"available": False, "reason": "no bevflow-person-centernet-int8.onnx shipped beside bevflow-person-centernet.onnx"}

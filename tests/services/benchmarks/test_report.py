@@ -60,7 +60,9 @@ def every_part() -> dict:
                                "stage_cpu_ms_p50": stages, "MOTA": 0.99, "IDF1": 0.98}],
                      "skipped": [{"people": 1000, "cameras": 4, "why": "2.5 people/m²"}]},
         "detector": {"available": True, "reason": None, "rows": [{"height_m": 3.3, "threads": 2, "frame": "369x369", "input": "256x256",
-                                                                 "ms_p50": 6.2, "ms_p90": 6.3, "boxes": 13}]},
+                                                                 "ms_p50": 6.2, "ms_p90": 6.3, "boxes": 13}],
+                     "int8": {"available": True, "height_m": 5.5, "threads": 2, "ms_p50": {"float32": 22.6, "int8": 25.5},
+                              "speedup": 0.886}},
         "live": {"latency_4_cameras": run, "detector": "simulator boxes",
                  "max_cameras": {"max_cameras": 8, "lower_bound_only": False, "probes": [
                      {"cameras": 4, "kept_up": True, "why": "kept up", "tracks_latency_p99_ms": 40.0, "frames_dropped_at_source": 0, "people": 30},
@@ -87,6 +89,7 @@ def test_every_part_has_a_table() -> None:
     result["parts"] |= every_part()
     text = "\n".join(console_lines(result))
     for expected in ("skipped: 1000 people on 4 cameras: 2.5 people/m²", "3.3 m, 2 threads: frame 369x369 -> input 256x256: 6.2 ms p50",
+                     "general model at 5.5 m, 2 threads, alternating: float32 22.6 ms, INT8 25.5 ms p50 (speedup 0.886)",
                      "largest number of simulated 10 fps cameras kept up with: 8", "4 cameras, 30 people: kept up",
                      "camera folders recorded before the run, through the detector service:", "p99 900 ms",
                      "frames detected 1100, skipped by the detector 90", "largest number of recorded 10 fps cameras kept up with: 1",

@@ -7,6 +7,7 @@ import pytest
 from bevflow.detect.runtime import (
     DEFAULT_MODEL,
     DEFAULT_RANGES,
+    INT8_MODEL,
     LOW_CEILING_MODEL,
     RENDER_TRAINED_RANGES,
     Detector,
@@ -37,10 +38,11 @@ class FakeDetector:
         self.model_path, self.threads, self.options = Path(path), threads, options
 
 
-def test_the_shipped_model_is_found_by_name() -> None:
-    assert DEFAULT_MODEL.stem in shipped_model_names()
-    assert resolve_model(DEFAULT_MODEL.stem) == DEFAULT_MODEL
-    assert resolve_model(DEFAULT_MODEL.name) == DEFAULT_MODEL
+@pytest.mark.parametrize("model", [DEFAULT_MODEL, INT8_MODEL])
+def test_a_shipped_model_is_found_by_name(model: Path) -> None:
+    assert model.stem in shipped_model_names()
+    assert resolve_model(model.stem) == model
+    assert resolve_model(model.name) == model
 
 
 @pytest.mark.parametrize("relative", [True, False])
