@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from bevflow.detect.rotated import rotated_corners, rotated_iou_matrix
-from bevflow.detect.tiles import RIM_TILES, TILE_MODEL, RimTileDetector, TileLayout, rotated_nms
+from bevflow.detect.tiles import RIM_TILES, TILE_MODEL, RimTileDetector, TileLayout, prefiltered, rotated_nms
 from bevflow.detections import Boxes
 
 RADIUS = 200.0
@@ -144,13 +144,33 @@ class CentreModel:
 @pytest.mark.parametrize(
     ("centre_scale", "shrunk_by"),
     [
-        (0.1, 0.4),  # the centre model shrinks further: it takes the frame as the tiles do
+        (0.1, 0.5),  # the centre model shrinks further: it takes the frame halved, as the tiles do
         (0.9, 1.0),  # it would need more than the shrunk frame holds: the frame as it came
     ],
 )
 def test_the_centre_model_gets_the_shrunk_frame_only_where_it_shrinks_further(centre_scale: float, shrunk_by: float) -> None:
-    frame = cv2.resize(_frame([]), (880, 880))  # a circle of 400 px: the 128 px tiles shrink it by 0.4
+    frame = cv2.resize(_frame([]), (880, 880))  # a circle of 400 px: the 128 px tiles shrink it by 0.4, halved first
     centre = CentreModel(centre_scale)
     RimTileDetector(UprightBlobs(), centre=centre).detect_rotated(frame, 3.0, 2 * FOCAL, (439.5, 439.5))  # type: ignore[arg-type]
     [(width, focal)] = centre.given
     assert focal == pytest.approx(2 * FOCAL * shrunk_by) and width == pytest.approx(2 * 0.55 * 2 * RADIUS * shrunk_by, abs=3)
+
+
+@pytest.mark.parametrize(
+    ("k", "halvings", "smoothed"),
+    [
+        (1.0, 0, False),  # nothing to shrink: the frame as it came
+        (0.8, 0, True),  # all of the shrink left to the warp: smoothed for it
+        (0.5, 1, False),  # exactly halved: nothing left to the warp
+        (0.3, 1, True),  # halved once, 0.6 left to the warp
+        (0.2, 2, True),  # halved twice, 0.8 left
+    ],
+)
+def test_a_frame_is_halved_as_far_as_it_goes_and_smoothed_where_the_warp_shrinks_the_rest(k: float, halvings: int, smoothed: bool) -> None:
+    width = 2**halvings  # stripes this wide are one pixel wide once halved: what a shrinking warp would alias
+    stripes = np.zeros((64, 64, 3), np.uint8)
+    stripes[:, (np.arange(64) // width) % 2 == 1] = 255
+    out = prefiltered(stripes, k)
+    assert out.shape == (64 >> halvings, 64 >> halvings, 3) and out.dtype == np.uint8
+    spread = int(out[:, 1:-1].max()) - int(out[:, 1:-1].min())
+    assert spread == 255 if not smoothed else 100 < spread < 200  # σ 0.5 px keeps 0.79 of a pixel, spreads 0.21
