@@ -29,13 +29,13 @@ def test_the_image_circle_of_a_real_frame() -> None:
 def test_the_default_detector_on_real_frames_with_nothing_given() -> None:
     s = evaluate_detector(DetectorBank(DEFAULT_RANGES, score_threshold=0.05), FRAMES / "annotations.json", FRAMES / "images")
     assert s.annotations == 82
-    # Measured 0.837 and 0.863 (rim tiles through FastestDet, the frames assumed 3 m up); a person
+    # Measured 0.851 and 0.854 (rim tiles through FastestDet, the frames assumed 3 m up); a person
     # is about 0.012. The bar is 0.75 and 0.65.
-    assert s.AP50_rotated >= 0.80 and s.AP50 >= 0.85
+    assert s.AP50_rotated >= 0.83 and s.AP50 >= 0.84
 
 
 @pytest.mark.slow
 def test_rim_tiles_through_yolox_on_real_frames() -> None:
     s = evaluate_detector(load_rim_tiles(score_threshold=0.05, tile_model=YOLOX), FRAMES / "annotations.json", FRAMES / "images")
-    # Measured 0.953 and 0.928.
+    # Measured 0.982 and 0.937.
     assert s.AP50_rotated >= 0.90 and s.AP50 >= 0.88
