@@ -23,12 +23,12 @@ def add_detector_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of ``bevflow evaluate`` that score the person detector on annotated frames."""
     group = parser.add_argument_group("detector evaluation (--detector --images DIR --annotations FILE)")
     group.add_argument("--detector", action="store_true", help="run the real person detector on images instead of using annotated boxes")
-    group.add_argument("--model", type=Path, metavar="PATH",
-                       help="the ONNX detector, or 'rim-tiles': rim tiles turned upright through a detector trained on "
+    group.add_argument("--model", type=Path, metavar="MODEL",
+                       help="the ONNX detector (a file or a shipped model's name, e.g. bevflow-person-centernet-int8), or 'rim-tiles': rim tiles turned upright through a detector trained on "
                        "photographs (default: what a site gets, by each frame's camera height: rim-tiles under 5 m, "
                        "the shipped general model from 5 m)")  # fmt: skip
-    group.add_argument("--tile-model", type=Path, metavar="PATH",
-                       help="with rim-tiles: the ONNX model run on the tiles (default: the shipped FastestDet; the "
+    group.add_argument("--tile-model", type=Path, metavar="MODEL",
+                       help="with rim-tiles: the ONNX model run on the tiles, a file or a shipped model's name (default: the shipped FastestDet; the "
                        "shipped yolox-nano-coco.onnx beside it is more accurate and slower)")  # fmt: skip
     group.add_argument("--annotations", type=Path, metavar="FILE", help="COCO JSON of the --images: bbox [x,y,w,h] or rotated [cx,cy,w,h,deg]")
     group.add_argument("--threads", type=int, default=2, metavar="N", help="ONNX Runtime threads (default 2)")
@@ -65,16 +65,20 @@ def run_detector_evaluation(args: argparse.Namespace) -> int:
     from bevflow.evaluation.detector import detect_frames, score_frames
     from bevflow.evaluation.drawing import write_drawings
 
+    from bevflow_services.detector.models import resolve_model
+
     _check(args)
     try:
         # Score every detection: AP needs the whole precision-recall curve.
         detector: Detector | RimTileDetector | DetectorBank
         if str(args.model) == RIM_TILES:
-            detector = load_rim_tiles(threads=args.threads, tile_model=args.tile_model, score_threshold=0.05)
+            tiles = resolve_model(args.tile_model) if args.tile_model is not None else None
+            detector = load_rim_tiles(threads=args.threads, tile_model=tiles, score_threshold=0.05)
         elif args.model is None and args.scale is None:  # each frame gets the model of its (assumed) height
             detector = DetectorBank(DEFAULT_RANGES, threads=args.threads, score_threshold=0.05)
         else:
-            detector = Detector(args.model, threads=args.threads, score_threshold=0.05)
+            model = resolve_model(args.model) if args.model is not None else None
+            detector = Detector(model, threads=args.threads, score_threshold=0.05)
         results, ms = detect_frames(detector, args.annotations, args.images, args.camera_height, args.focal, args.scale,
                                     log=print)  # fmt: skip
         scores = score_frames(results, ms)

@@ -53,7 +53,9 @@ def test_given_calibration_is_used_and_nothing_is_assumed(tmp_path: Path, capsys
      (["--scale", "0"], "--scale must be a number > 0, got 0.0"),
      (["--threads", "0"], "--threads must be positive, got 0"),
      (["--model", "rim-tiles", "--scale", "0.5"], "--model rim-tiles sizes its tiles from the focal length"),
-     (["--tile-model", "x.onnx"], "--tile-model goes with --model rim-tiles")],
+     (["--tile-model", "x.onnx"], "--tile-model goes with --model rim-tiles"),
+     (["--model", "nope"], "detector model 'nope' is neither an ONNX file nor a shipped model (shipped: "),
+     (["--model", "rim-tiles", "--tile-model", "nope"], "detector model 'nope' is neither")],
 )
 def test_bad_options_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture, extra: list[str], message: str) -> None:
     images, ann = _frames(tmp_path)
@@ -64,4 +66,12 @@ def test_bad_options_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture, extra
 def test_rim_tiles_runs_on_the_same_frames(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     images, ann = _frames(tmp_path)
     assert main(["evaluate", "--detector", "--model", "rim-tiles", "--images", str(images), "--annotations", str(ann)]) == 0
+    assert "AP50_rotated" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("model", [["--model", "bevflow-person-centernet-int8", "--scale", "1"],
+                                   ["--model", "rim-tiles", "--tile-model", "yolox-nano-coco"]])
+def test_a_shipped_model_is_named_as_in_a_site_file(tmp_path: Path, capsys: pytest.CaptureFixture, model: list[str]) -> None:
+    images, ann = _frames(tmp_path)
+    assert main(["evaluate", "--detector", *model, "--images", str(images), "--annotations", str(ann)]) == 0
     assert "AP50_rotated" in capsys.readouterr().out
