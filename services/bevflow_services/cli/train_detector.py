@@ -194,6 +194,8 @@ def _quantize(args: argparse.Namespace) -> int:
         frames = read_coco(args.frames)[: _count(args.count, "--count")]
     except CocoError as exc:
         raise UserError(str(exc)) from None
+    if not frames:
+        raise UserError(f"--frames {args.frames} has no frames to calibrate on")
     out = quantize_detector(args.model, frames, args.out)
     print(json.dumps({"model": str(out), "bytes": out.stat().st_size, "frames": len(frames)}))
     return 0
