@@ -178,11 +178,9 @@ def prefiltered(image: NDArray[np.uint8], k: float) -> NDArray[np.uint8]:
     """``image`` made ready for the tiles' bilinear warp to shrink it ``k`` times (``k`` < 1):
     halved by area-averaging while ``k`` <= 0.5 (OpenCV's fast path), then, where some shrink is
     left to the warp, smoothed by a 3 × 3 Gaussian of σ 0.5 px so that the warp does not alias.
-    On a 2048 px frame (2 threads) that takes 1 ms; an area resize to exactly ``k`` after the
-    halving took 5.2, 4.4 of them for its last, fractional step. On the real frames of
-    docs/RESULTS.md both score alike (AP50 / AP50_rotated 0.854 / 0.851 against 0.863 / 0.837;
-    cut to 1920 × 1080 0.935 / 0.964 against 0.924 / 0.952; at 1024 px 0.863 / 0.871 against
-    0.896 / 0.874); without the smoothing AP50 fell to 0.805."""
+    On a 2048 px frame (2 threads) that takes 1 ms, where an area resize to exactly ``k`` took
+    5.2 (4.4 of them for its fractional step), and the real frames of docs/RESULTS.md score alike
+    either way; without the smoothing their AP50 falls from 0.85 to 0.81."""
     while k <= 0.5 and min(image.shape[:2]) >= 2:
         image = np.asarray(cv2.resize(image, (image.shape[1] // 2, image.shape[0] // 2), interpolation=cv2.INTER_AREA), dtype=np.uint8)
         k *= 2
