@@ -13,20 +13,32 @@ radius is searched (``bevflow.detect.window``; ``--whole-frame`` searches it all
 drops everyone outside it, and a demo-hall camera's window is 58 % of its frame.
 
 Latest frame wins: each camera keeps only its newest unprocessed frame; every pass takes each
-camera's newest frame and detects them in turn, so a detector slower than its cameras skips
-frames (counted) instead of falling behind;
+camera's newest frame and detects them, ``--workers`` frames at once, so a detector slower than
+its cameras skips frames (counted) instead of falling behind;
 the skipped sequence numbers show as dropped frames in the gateway's camera health. Bad frames
 (garbage payloads, a size that does not fit the camera, undecodable JPEG) are logged, counted and
 skipped.
+
+Workers: on the CPU, several frames each on one ONNX Runtime thread get more frames through than
+one frame at a time on all the threads (a 5.5 m camera's window on 2 cores: 82–84 against 70–71
+frames a second, ``docs/BENCHMARKS.md``): a small network's layers leave a session's threads
+waiting on each other, and the Python around each inference runs on one core. So by default
+there is a worker per usable core (at most one per camera), and the cores are shared out among
+them as each inference's threads.
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
 import logging
+import os
 import threading
 import time
 from collections import Counter
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
@@ -59,7 +71,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--model", default=None, metavar="MODEL",
                        help="ONNX file or shipped model name for cameras whose site entry names none "
                        "(default: the shipped model for the camera's height)")
-    group.add_argument("--threads", type=int, default=2, help="ONNX Runtime threads per inference (default 2)")
+    group.add_argument("--workers", type=int, default=None, metavar="N",
+                       help="frames detected at once, each camera's one at a time (default: one per usable CPU core, "
+                       "at most one per camera)")
+    group.add_argument("--threads", type=int, default=None, metavar="N",
+                       help="ONNX Runtime threads per inference (default: the usable CPU cores shared among the "
+                       "workers, at least 1)")
     group.add_argument("--score-threshold", type=float, default=0.4,
                        help="lowest confidence of a reported person, 0 to 1 (default 0.4)")
     group.add_argument("--providers", default=None, metavar="LIST",
@@ -172,7 +189,8 @@ def main(args: argparse.Namespace) -> int:
     site_dir = site_path.parent if site_path.is_file() else None
     try:
         providers = check_providers(args.providers.split(",")) if args.providers is not None else site.detector_providers
-        models = CameraModels(site, cameras, site_dir=site_dir, default=args.model, threads=args.threads,
+        workers, threads = share_cores(len(cameras), args.workers, args.threads, usable_cores())
+        models = CameraModels(site, cameras, site_dir=site_dir, default=args.model, threads=threads,
                               score_threshold=args.score_threshold, providers=providers)
     except (DetectorError, ValueError) as exc:
         raise UserError(f"--providers: {exc}" if "provider" in str(exc) else str(exc)) from None
@@ -186,13 +204,13 @@ def main(args: argparse.Namespace) -> int:
     publications = {c: bus.Publication(session, keys.detections(c), codec) for c in cameras}
     token = bus.announce(session, keys, SERVICE)
     print(f"bevflow detector: site {site_id!r}, {len(cameras)} cameras, models {models.models()}, "
-          f"on {', '.join(models.providers())}", flush=True)
+          f"on {', '.join(models.providers())}, {workers} workers of {threads} threads", flush=True)
     try:
         book = MetricsBook()
         for camera, (model, provider) in models.runs_on().items():
             book.set("detector_model_info", 1.0, camera=camera, model=model, provider=provider)
         with stop_on_signals() as stop, reporting(session, site_id, SERVICE, book):
-            serve(inboxes, publications, worker, stats, stop, wake, book)
+            serve(inboxes, publications, worker, stats, stop, wake, book, workers=workers)
     finally:
         token.undeclare()
         for inbox in inboxes.values():
@@ -203,46 +221,79 @@ def main(args: argparse.Namespace) -> int:
     return 0
 
 
+def usable_cores() -> int:
+    """The CPU cores this process may run on."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+def share_cores(cameras: int, workers: int | None, threads: int | None, cores: int) -> tuple[int, int]:
+    """(workers, ONNX Runtime threads per inference): those asked for, else a worker per core (at
+    most one per camera, as a camera's frames are detected one at a time) and the cores shared
+    out among them (module docstring, "Workers")."""
+    for name, value in (("--workers", workers), ("--threads", threads)):
+        if value is not None and value < 1:
+            raise UserError(f"{name} must be at least 1, got {value}")
+    chosen = workers if workers is not None else max(1, min(cores, cameras))
+    return chosen, threads if threads is not None else max(1, cores // chosen)
+
+
 def serve(inboxes: dict[str, _Inbox], publications: dict[str, bus.Publication[Detections2D]],
           worker: FrameDetector, stats: bus.BusStats, stop: threading.Event, wake: threading.Event,
-          book: MetricsBook | None = None) -> None:
-    """Serve the cameras in turn, each its newest frame, until ``stop`` is set; ``book`` gets
-    each frame's capture-to-published time."""
+          book: MetricsBook | None = None, workers: int = 1) -> None:
+    """Serve the cameras, each its newest frame, ``workers`` frames at once, until ``stop`` is
+    set; ``book`` gets each frame's capture-to-published time."""
     book = book if book is not None else MetricsBook()
     detected = 0
     next_report = time.monotonic() + REPORT_EVERY_S
-    while not stop.is_set():
-        wake.wait(0.2)
-        wake.clear()  # before the pass: a frame arriving during it wakes the next one
-        # Take every camera's newest frame first, then detect: the frames of one pass come from
-        # about the same moment, so the tracker gets the cameras of one instant together.
-        pending = [(camera, inbox.key, inbox.take(timeout=0)) for camera, inbox in inboxes.items()]
-        results: list[Detections2D] = []
-        for camera, key, frame in pending:
-            if frame is None:
-                continue
-            if frame.header.camera != camera:
-                stats.reject(key, "wrong_camera", f"a frame of {frame.header.camera!r} on {camera}'s key")
-                continue
-            try:
-                message = worker.detect(frame.header, frame.image)
-            except BadFrame as exc:
-                stats.reject(key, exc.reason, exc.detail)
-                continue
-            except Exception:  # a bug on one frame must not stop the other cameras
-                stats.count("handler_errors")
-                log.exception("could not run the detector on %s/%d; skipping it", camera, frame.header.seq)
-                continue
-            results.append(message)
-        for camera, count in worker.reused.items():  # frames whose boxes were reused, since the last pass
-            book.count("detector_frames_reused", count, camera=camera)
-        worker.reused.clear()
-        # Published together at the end of the pass: the tracker closes a tick as soon as every
-        # camera it waits for has reported, so cameras of one instant should arrive together.
-        for message in results:
-            publications[message.camera].put(message)
-            book.observe("detector_latency_seconds", max(0.0, (time.time_ns() - message.capture_ns) / 1e9))
-            detected += 1
-        if time.monotonic() >= next_report:
-            next_report += REPORT_EVERY_S
-            log.info("frames detected %d; bus %s", detected, stats.snapshot())
+    pool = ThreadPoolExecutor(workers, thread_name_prefix="detect") if workers > 1 else None
+    run: Callable[[_Pending], Detections2D | None] = functools.partial(_detect_one, worker, stats)
+    try:
+        while not stop.is_set():
+            wake.wait(0.2)
+            wake.clear()  # before the pass: a frame arriving during it wakes the next one
+            # Take every camera's newest frame first, then detect: the frames of one pass come
+            # from about the same moment, so the tracker gets the cameras of one instant together.
+            pending = [_Pending(camera, inbox.key, frame) for camera, inbox in inboxes.items()
+                       if (frame := inbox.take(timeout=0)) is not None]
+            outcomes = list(pool.map(run, pending)) if pool is not None and len(pending) > 1 else list(map(run, pending))
+            results = [message for message in outcomes if message is not None]
+            for camera, count in worker.reused.items():  # frames whose boxes were reused, since the last pass
+                book.count("detector_frames_reused", count, camera=camera)
+            worker.reused.clear()
+            # Published together at the end of the pass: the tracker closes a tick as soon as
+            # every camera it waits for has reported, so cameras of one instant should arrive
+            # together.
+            for message in results:
+                publications[message.camera].put(message)
+                book.observe("detector_latency_seconds", max(0.0, (time.time_ns() - message.capture_ns) / 1e9))
+                detected += 1
+            if time.monotonic() >= next_report:
+                next_report += REPORT_EVERY_S
+                log.info("frames detected %d; bus %s", detected, stats.snapshot())
+    finally:
+        if pool is not None:
+            pool.shutdown(wait=True)
+
+
+@dataclass(frozen=True)
+class _Pending:
+    camera: str
+    key: str
+    frame: bus.Frame
+
+
+def _detect_one(worker: FrameDetector, stats: bus.BusStats, pending: _Pending) -> Detections2D | None:
+    """One camera's frame through the detector; None (counted and logged) for a frame that does
+    not fit its camera or a bug, which must not stop the other cameras."""
+    camera, key, frame = pending.camera, pending.key, pending.frame
+    if frame.header.camera != camera:
+        stats.reject(key, "wrong_camera", f"a frame of {frame.header.camera!r} on {camera}'s key")
+        return None
+    try:
+        return worker.detect(frame.header, frame.image)
+    except BadFrame as exc:
+        stats.reject(key, exc.reason, exc.detail)
+    except Exception:  # a bug on one frame must not stop the other cameras
+        stats.count("handler_errors")
+        log.exception("could not run the detector on %s/%d; skipping it", camera, frame.header.seq)
+    return None

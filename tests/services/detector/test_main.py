@@ -16,7 +16,8 @@ from bevflow.sim.scene import SceneConfig, SceneFrame
 from bevflow.site import parse_site
 
 from bevflow_services import bus
-from bevflow_services.detector.main import BadFrame, FrameDetector, serve
+from bevflow_services.detector.main import BadFrame, FrameDetector, serve, share_cores
+from bevflow_services.runtime import UserError
 
 SITE = parse_site("""
 site: hall
@@ -128,7 +129,8 @@ class ExplodingDetector(FakeDetector):
         raise RuntimeError("a bug")
 
 
-def test_the_loop_skips_bad_frames_and_bugs_and_goes_on_with_the_other_cameras() -> None:
+@pytest.mark.parametrize("workers", [1, 2])
+def test_the_loop_skips_bad_frames_and_bugs_and_goes_on_with_the_other_cameras(workers: int) -> None:
     frame = np.zeros((400, 500, 3), np.uint8)
     inboxes = {
         "a": FakeInbox("k/a", [bus.Frame(header("a", 500, 400, seq=1), frame), bus.Frame(header("b", 500, 400, seq=2), frame),
@@ -141,7 +143,7 @@ def test_the_loop_skips_bad_frames_and_bugs_and_goes_on_with_the_other_cameras()
     stop, wake = threading.Event(), threading.Event()
     wake.set()
     worker = FrameDetector(SITE, {"a": FakeDetector(), "b": ExplodingDetector()})
-    thread = threading.Thread(target=serve, args=(inboxes, publications, worker, stats, stop, wake))
+    thread = threading.Thread(target=serve, args=(inboxes, publications, worker, stats, stop, wake), kwargs={"workers": workers})
     thread.start()
     for _ in range(50):
         wake.set()
@@ -155,6 +157,62 @@ def test_the_loop_skips_bad_frames_and_bugs_and_goes_on_with_the_other_cameras()
     assert publications["b"].sent == []
     assert stats.rejected == {"wrong_camera": 1, "frame_size": 1}
     assert stats.handler_errors == 1
+
+
+class MeetingDetector(FakeDetector):
+    """Returns only once ``parties`` calls are in the detector at the same time (or fails)."""
+
+    def __init__(self, meeting: threading.Barrier) -> None:
+        super().__init__()
+        self.meeting = meeting
+
+    def detect(self, image: np.ndarray, camera_height_m: float, focal_px: float) -> Boxes:
+        self.meeting.wait(timeout=10)  # BrokenBarrierError if the frames came one at a time
+        return super().detect(image, camera_height_m, focal_px)
+
+
+def test_workers_detect_the_cameras_frames_of_one_pass_at_the_same_time() -> None:
+    frame = np.zeros((400, 500, 3), np.uint8)
+    meeting = threading.Barrier(2)
+    inboxes = {c: FakeInbox(f"k/{c}", [bus.Frame(header(c, 500, 400, seq=7), frame)]) for c in ("a", "b")}
+    publications = {"a": FakePublication(), "b": FakePublication()}
+    stats, stop, wake = bus.BusStats(), threading.Event(), threading.Event()
+    wake.set()
+    worker = FrameDetector(SITE, {"a": MeetingDetector(meeting), "b": MeetingDetector(meeting)})
+    thread = threading.Thread(target=serve, args=(inboxes, publications, worker, stats, stop, wake), kwargs={"workers": 2})
+    thread.start()
+    for _ in range(500):
+        if all(p.sent for p in publications.values()):
+            break
+        threading.Event().wait(0.01)
+    stop.set()
+    thread.join(5)
+    assert not thread.is_alive()
+    assert [m.seq for m in publications["a"].sent + publications["b"].sent] == [7, 7]
+    assert stats.handler_errors == 0  # a broken meeting would have been counted as a bug
+
+
+@pytest.mark.parametrize(
+    ("cameras", "workers", "threads", "cores", "expected"),
+    [
+        (6, None, None, 2, (2, 1)),  # a worker per core, one thread each
+        (1, None, None, 2, (1, 2)),  # one camera: its frames come one at a time, on both cores
+        (3, None, None, 8, (3, 2)),  # no more workers than cameras; the cores shared among them
+        (20, None, None, 8, (8, 1)),
+        (6, 1, None, 2, (1, 2)),  # the old way: one frame at a time on every core
+        (6, None, 4, 2, (2, 4)),  # as asked, even beyond the cores
+        (6, 3, 1, 2, (3, 1)),
+    ],
+)
+def test_the_cores_are_shared_among_the_workers(cameras: int, workers: int | None, threads: int | None, cores: int,
+                                                expected: tuple[int, int]) -> None:  # fmt: skip
+    assert share_cores(cameras, workers, threads, cores) == expected
+
+
+@pytest.mark.parametrize(("workers", "threads", "named"), [(0, None, "--workers"), (None, 0, "--threads")])
+def test_no_workers_or_threads_is_refused(workers: int | None, threads: int | None, named: str) -> None:
+    with pytest.raises(UserError, match=named):
+        share_cores(4, workers, threads, 2)
 
 
 @pytest.mark.skipif(importlib.util.find_spec("onnxruntime") is None, reason="onnxruntime is not installed")
