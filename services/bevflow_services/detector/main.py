@@ -12,12 +12,11 @@ detector's scale, is mapped back). Only the window of the frame around the camer
 radius is searched (``bevflow.detect.window``; ``--whole-frame`` searches it all): the projector
 drops everyone outside it, and a demo-hall camera's window is 58 % of its frame.
 
-Latest frame wins: each camera keeps only its newest unprocessed frame; every pass takes each
-camera's newest frame and detects them, ``--workers`` frames at once, so a detector slower than
-its cameras skips frames (counted) instead of falling behind;
-the skipped sequence numbers show as dropped frames in the gateway's camera health. Bad frames
-(garbage payloads, a size that does not fit the camera, undecodable JPEG) are logged, counted and
-skipped.
+Latest frame wins: each camera keeps only its newest unprocessed frame, and the workers take the
+cameras whose frames have waited longest first (``bevflow_services.detector.schedule``), so a
+detector slower than its cameras skips frames (counted) instead of falling behind; the skipped
+sequence numbers show as dropped frames in the gateway's camera health. Bad frames (garbage
+payloads, a size that does not fit the camera, undecodable JPEG) are logged, counted and skipped.
 
 Workers: on the CPU, several frames each on one ONNX Runtime thread get more frames through than
 one frame at a time on all the threads (a 5.5 m camera's window on 2 cores: 82–84 against 70–71
@@ -30,15 +29,12 @@ them as each inference's threads.
 from __future__ import annotations
 
 import argparse
-import functools
 import logging
 import os
 import threading
 import time
 from collections import Counter
-from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import cv2
@@ -56,6 +52,7 @@ from bevflow.site import Site
 
 from bevflow_services import bus
 from bevflow_services.detector.models import CameraModels
+from bevflow_services.detector.schedule import ReadyCameras
 from bevflow_services.runtime import UserError, service_site, stop_on_signals
 from bevflow_services.service_metrics import MetricsBook, reporting
 
@@ -166,15 +163,15 @@ def _bgr(header: FrameHeader, image: np.ndarray) -> np.ndarray:
 
 
 class _Inbox(bus.LatestSubscription[bus.Frame]):
-    """A camera's newest frame; wakes the worker when one arrives."""
+    """A camera's newest frame; tells ``ready`` when one arrives."""
 
-    def __init__(self, session, key: str, stats: bus.BusStats, wake: threading.Event) -> None:
-        self._wake = wake
+    def __init__(self, session, camera: str, key: str, stats: bus.BusStats, ready: ReadyCameras) -> None:
+        self._camera, self._ready_cameras = camera, ready
         super().__init__(session, key, bus.FRAMES, keep=1, stats=stats)
 
     def _accept(self, sample) -> None:
         super()._accept(sample)
-        self._wake.set()
+        self._ready_cameras.arrived(self._camera)
 
 
 def main(args: argparse.Namespace) -> int:
@@ -199,8 +196,8 @@ def main(args: argparse.Namespace) -> int:
     stats = bus.BusStats()
     session = bus.open_session(bus.config_from_args(args))
     codec = bus.JsonCodec(Detections2D)
-    wake = threading.Event()
-    inboxes = {c: _Inbox(session, keys.frame(c), stats, wake) for c in cameras}
+    ready = ReadyCameras()
+    inboxes = {c: _Inbox(session, c, keys.frame(c), stats, ready) for c in cameras}
     publications = {c: bus.Publication(session, keys.detections(c), codec) for c in cameras}
     token = bus.announce(session, keys, SERVICE)
     print(f"bevflow detector: site {site_id!r}, {len(cameras)} cameras, models {models.models()}, "
@@ -210,7 +207,7 @@ def main(args: argparse.Namespace) -> int:
         for camera, (model, provider) in models.runs_on().items():
             book.set("detector_model_info", 1.0, camera=camera, model=model, provider=provider)
         with stop_on_signals() as stop, reporting(session, site_id, SERVICE, book):
-            serve(inboxes, publications, worker, stats, stop, wake, book, workers=workers)
+            serve(inboxes, publications, worker, stats, stop, ready, book, workers=workers)
     finally:
         token.undeclare()
         for inbox in inboxes.values():
@@ -238,57 +235,87 @@ def share_cores(cameras: int, workers: int | None, threads: int | None, cores: i
 
 
 def serve(inboxes: dict[str, _Inbox], publications: dict[str, bus.Publication[Detections2D]],
-          worker: FrameDetector, stats: bus.BusStats, stop: threading.Event, wake: threading.Event,
+          worker: FrameDetector, stats: bus.BusStats, stop: threading.Event, ready: ReadyCameras,
           book: MetricsBook | None = None, workers: int = 1) -> None:
-    """Serve the cameras, each its newest frame, ``workers`` frames at once, until ``stop`` is
-    set; ``book`` gets each frame's capture-to-published time."""
-    book = book if book is not None else MetricsBook()
-    detected = 0
-    next_report = time.monotonic() + REPORT_EVERY_S
-    pool = ThreadPoolExecutor(workers, thread_name_prefix="detect") if workers > 1 else None
-    run: Callable[[_Pending], Detections2D | None] = functools.partial(_detect_one, worker, stats)
+    """Serve the cameras that ``ready`` names, each its newest frame, on ``workers`` threads,
+    until ``stop`` is set; ``book`` gets each frame's capture-to-published time. A worker that
+    fails (not on a frame: those are counted and skipped) stops the others and is raised here."""
+    service = _Workers(inboxes, publications, worker, stats, ready, book if book is not None else MetricsBook())
+    threads = [threading.Thread(target=service.work, args=(stop,), name=f"detect-{i}") for i in range(workers)]
+    for thread in threads:
+        thread.start()
     try:
-        while not stop.is_set():
-            wake.wait(0.2)
-            wake.clear()  # before the pass: a frame arriving during it wakes the next one
-            # Take every camera's newest frame first, then detect: the frames of one pass come
-            # from about the same moment, so the tracker gets the cameras of one instant together.
-            pending = [_Pending(camera, inbox.key, frame) for camera, inbox in inboxes.items()
-                       if (frame := inbox.take(timeout=0)) is not None]
-            outcomes = list(pool.map(run, pending)) if pool is not None and len(pending) > 1 else list(map(run, pending))
-            results = [message for message in outcomes if message is not None]
-            for camera, count in worker.reused.items():  # frames whose boxes were reused, since the last pass
-                book.count("detector_frames_reused", count, camera=camera)
-            worker.reused.clear()
-            # Published together at the end of the pass: the tracker closes a tick as soon as
-            # every camera it waits for has reported, so cameras of one instant should arrive
-            # together.
-            for message in results:
-                publications[message.camera].put(message)
-                book.observe("detector_latency_seconds", max(0.0, (time.time_ns() - message.capture_ns) / 1e9))
-                detected += 1
-            if time.monotonic() >= next_report:
-                next_report += REPORT_EVERY_S
-                log.info("frames detected %d; bus %s", detected, stats.snapshot())
+        while not stop.wait(REPORT_EVERY_S):
+            log.info("frames detected %d; bus %s", service.detected, stats.snapshot())
     finally:
-        if pool is not None:
-            pool.shutdown(wait=True)
+        stop.set()
+        for thread in threads:
+            thread.join()
+    if service.failure is not None:
+        raise service.failure
 
 
-@dataclass(frozen=True)
-class _Pending:
-    camera: str
-    key: str
-    frame: bus.Frame
+@dataclass
+class _Workers:
+    """What the worker threads share; each works on one camera's newest frame at a time."""
+
+    inboxes: dict[str, _Inbox]
+    publications: dict[str, bus.Publication[Detections2D]]
+    detector: FrameDetector
+    stats: bus.BusStats
+    ready: ReadyCameras
+    book: MetricsBook
+    detected: int = 0
+    failure: BaseException | None = None
+    _lock: threading.Lock = field(default_factory=threading.Lock)
+
+    def work(self, stop: threading.Event) -> None:
+        try:
+            while not stop.is_set():
+                camera = self.ready.claim(timeout=0.2)
+                if camera is None:
+                    continue
+                try:
+                    self._serve(camera)
+                finally:
+                    self.ready.release(camera)
+        except BaseException as exc:
+            self.failure = exc
+            stop.set()
+
+    def _serve(self, camera: str) -> None:
+        # Published as soon as it is detected: the tracker closes a tick once every camera it
+        # waits for has reported, and a camera held back for others only makes that later.
+        inbox = self.inboxes[camera]
+        frame = inbox.take(timeout=0)
+        if frame is None:  # taken already, with an earlier claim
+            return
+        message = _detect_one(self.detector, self.stats, camera, inbox.key, frame)
+        reused = self.detector.reused.pop(camera, 0)  # this camera's counter: only its worker touches it
+        if reused:
+            self.book.count("detector_frames_reused", reused, camera=camera)
+        if message is None:
+            return
+        self.publications[camera].put(message)
+        self.book.observe("detector_latency_seconds", max(0.0, (time.time_ns() - message.capture_ns) / 1e9))
+        with self._lock:
+            self.detected += 1
 
 
-def _detect_one(worker: FrameDetector, stats: bus.BusStats, pending: _Pending) -> Detections2D | None:
+def _detect_one(worker: FrameDetector, stats: bus.BusStats, camera: str, key: str, frame: bus.Frame) -> Detections2D | None:
     """One camera's frame through the detector; None (counted and logged) for a frame that does
     not fit its camera or a bug, which must not stop the other cameras."""
-    camera, key, frame = pending.camera, pending.key, pending.frame
     if frame.header.camera != camera:
         stats.reject(key, "wrong_camera", f"a frame of {frame.header.camera!r} on {camera}'s key")
         return None
+    try:
+        return worker.detect(frame.header, frame.image)
+    except BadFrame as exc:
+        stats.reject(key, exc.reason, exc.detail)
+    except Exception:  # a bug on one frame must not stop the other cameras
+        stats.count("handler_errors")
+        log.exception("could not run the detector on %s/%d; skipping it", camera, frame.header.seq)
+    return None
     try:
         return worker.detect(frame.header, frame.image)
     except BadFrame as exc:

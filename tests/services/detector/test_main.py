@@ -17,6 +17,7 @@ from bevflow.site import parse_site
 
 from bevflow_services import bus
 from bevflow_services.detector.main import BadFrame, FrameDetector, serve, share_cores
+from bevflow_services.detector.schedule import ReadyCameras
 from bevflow_services.runtime import UserError
 
 SITE = parse_site("""
@@ -139,14 +140,14 @@ def test_the_loop_skips_bad_frames_and_bugs_and_goes_on_with_the_other_cameras(w
         "b": FakeInbox("k/b", [bus.Frame(header("b", 500, 400, seq=9), frame)]),
     }
     publications = {"a": FakePublication(), "b": FakePublication()}
-    stats = bus.BusStats()
-    stop, wake = threading.Event(), threading.Event()
-    wake.set()
+    stats, stop, ready = bus.BusStats(), threading.Event(), ReadyCameras()
     worker = FrameDetector(SITE, {"a": FakeDetector(), "b": ExplodingDetector()})
-    thread = threading.Thread(target=serve, args=(inboxes, publications, worker, stats, stop, wake), kwargs={"workers": workers})
+    thread = threading.Thread(target=serve, args=(inboxes, publications, worker, stats, stop, ready), kwargs={"workers": workers})
     thread.start()
-    for _ in range(50):
-        wake.set()
+    for _ in range(500):
+        for camera, inbox in inboxes.items():
+            if inbox.frames:
+                ready.arrived(camera)
         if not any(i.frames for i in inboxes.values()):
             break
         threading.Event().wait(0.01)
@@ -171,15 +172,16 @@ class MeetingDetector(FakeDetector):
         return super().detect(image, camera_height_m, focal_px)
 
 
-def test_workers_detect_the_cameras_frames_of_one_pass_at_the_same_time() -> None:
+def test_workers_detect_two_cameras_frames_at_the_same_time() -> None:
     frame = np.zeros((400, 500, 3), np.uint8)
     meeting = threading.Barrier(2)
     inboxes = {c: FakeInbox(f"k/{c}", [bus.Frame(header(c, 500, 400, seq=7), frame)]) for c in ("a", "b")}
     publications = {"a": FakePublication(), "b": FakePublication()}
-    stats, stop, wake = bus.BusStats(), threading.Event(), threading.Event()
-    wake.set()
+    stats, stop, ready = bus.BusStats(), threading.Event(), ReadyCameras()
+    for camera in inboxes:
+        ready.arrived(camera)
     worker = FrameDetector(SITE, {"a": MeetingDetector(meeting), "b": MeetingDetector(meeting)})
-    thread = threading.Thread(target=serve, args=(inboxes, publications, worker, stats, stop, wake), kwargs={"workers": 2})
+    thread = threading.Thread(target=serve, args=(inboxes, publications, worker, stats, stop, ready), kwargs={"workers": 2})
     thread.start()
     for _ in range(500):
         if all(p.sent for p in publications.values()):
@@ -303,3 +305,18 @@ def test_without_skip_still_every_frame_is_detected() -> None:
     for seq in range(3):
         worker.detect(FrameHeader(camera="a", seq=seq, capture_ns=seq * 100_000_000, width=1000, height=800), _walker_frame(480))
     assert len(fake.calls) == 3 and not worker.reused
+
+
+class FailingPublication(FakePublication):
+    def put(self, message) -> None:  # noqa: ANN001
+        raise RuntimeError("the session is gone")
+
+
+def test_a_worker_that_fails_outside_a_frame_stops_the_service_with_its_error() -> None:
+    frame = np.zeros((400, 500, 3), np.uint8)
+    inboxes = {"a": FakeInbox("k/a", [bus.Frame(header("a", 500, 400, seq=1), frame)])}
+    stats, stop, ready = bus.BusStats(), threading.Event(), ReadyCameras()
+    ready.arrived("a")
+    with pytest.raises(RuntimeError, match="the session is gone"):
+        serve(inboxes, {"a": FailingPublication()}, FrameDetector(SITE, {"a": FakeDetector()}), stats, stop, ready, workers=2)
+    assert stop.is_set()
