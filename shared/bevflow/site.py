@@ -355,7 +355,7 @@ class Site(_Strict):
     @model_validator(mode="after")
     def _zones_on_the_floor(self) -> Site:
         for k, zone in enumerate(self.zones):
-            if self.floor is not None and _outside(zone.polygon, self.floor) == "entirely":
+            if self.floor is not None and outside_floor(zone.polygon, self.floor) == "entirely":
                 raise ValueError(f"zones[{k}] (id {zone.id!r}).polygon: the zone lies entirely outside the floor "
                                  f"{list(self.floor)}")
         return self
@@ -405,7 +405,7 @@ class Site(_Strict):
 _CACHED = ("built_cameras", "camera_ids")
 
 
-def _outside(polygon: list[tuple[float, float]], floor: tuple[float, float, float, float]) -> str:
+def outside_floor(polygon: list[tuple[float, float]], floor: tuple[float, float, float, float]) -> str:
     """Whether a polygon lies "entirely", "partly" or "not" outside a floor rectangle (by its
     corners and bounding box: a zone is a few corners drawn by hand)."""
     xs, ys = [p[0] for p in polygon], [p[1] for p in polygon]
@@ -431,7 +431,7 @@ def odd_values(site: Site) -> list[str]:
             odd.append(f"{where}.monitored_radius_m: {radius:g} m is more than a camera at {camera.height_m:.2f} m "
                        f"usually places people well (about {min(MONITORED_RADIUS_USUAL_M, 4 * camera.height_m):.1f} m)")
     for k, zone in enumerate(site.zones):
-        if site.floor is not None and _outside(zone.polygon, site.floor) == "partly":
+        if site.floor is not None and outside_floor(zone.polygon, site.floor) == "partly":
             odd.append(f"zones[{k}] (id {zone.id!r}).polygon: part of the zone lies outside the floor {list(site.floor)}")
     return odd
 

@@ -1,11 +1,12 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from bevflow.site import load_site_or_builtin
+from bevflow.site import dump_site, load_site, load_site_or_builtin
 
 from bevflow_services.benchmarks import live
 from bevflow_services.benchmarks.live import hall_site, keeps_up, max_cameras
@@ -28,6 +29,15 @@ def test_more_cameras_extend_the_grid(cameras: int, cols: int, rows: int) -> Non
     assert (len(xs), len(ys)) == (cols, rows)
     x0, y0, x1, y1 = site.floor
     assert all(x0 < c.pose.position[0] < x1 and y0 < c.pose.position[1] < y1 for c in site.cameras)
+
+
+@pytest.mark.parametrize("cameras", [1, 2, 4, 5, 6, 8, 16, 32])
+def test_every_camera_count_tried_makes_a_site_the_services_accept(cameras: int, tmp_path: Path) -> None:
+    # The services read the site from a file, which is checked whole (zones on the floor, ...).
+    path = tmp_path / "bench.yaml"
+    path.write_text(dump_site(hall_site(cameras)))
+    site = load_site(path)
+    assert len(site.cameras) == cameras and site.zones  # at least the first zone stays on the floor
 
 
 def run(**changes: object) -> dict:
