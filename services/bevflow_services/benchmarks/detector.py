@@ -23,6 +23,7 @@ import importlib.util
 import math
 import time
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -140,6 +141,54 @@ def bench_int8(height_m: float = 5.5, threads: int = 2, rounds: int = 10, calls:
     ms = {name: percentile([t * 1e3 for t in values], 50) for name, values in times.items()}
     return {"available": True, "height_m": height_m, "threads": threads, "ms_p50": {k: round(v, 2) for k, v in ms.items()},
             "speedup": round(ms["float32"] / ms["int8"], 3) if ms["int8"] > 0 else None}
+
+
+def bench_workers(height_m: float = 5.5, cores: int = 2, rounds: int = 4, calls: int = 6,
+                  make_detector: Callable[[int], Detector] | None = None) -> dict:
+    """Frames a second through the general model on one camera's frame, on ``cores`` cores, three
+    ways timed in alternating rounds (so that all see the same machine load), each round
+    ``calls`` × ``cores`` frames: ``one_at_a_time`` on one session of ``cores`` threads;
+    ``workers``, ``cores`` sessions of one thread each working in parallel, as the detector
+    service runs them (``--workers``); ``batched``, ``cores`` frames per call on one session of
+    ``cores`` threads. ``speedup``: workers against one at a time (above 1: the service's default
+    pays on this CPU). ``make_detector(threads)`` overrides how the model is loaded (tests)."""
+    if make_detector is None:
+        reason = unavailable_reason(None)
+        if reason is not None:
+            return {"available": False, "reason": reason}
+        from bevflow.detect.runtime import DEFAULT_MODEL, Detector
+
+        def make_detector(threads: int) -> Detector:
+            return Detector(DEFAULT_MODEL, threads=threads)
+
+    frame, focal = frame_for(height_m)
+    shared, single = make_detector(cores), [make_detector(1) for _ in range(cores)]
+    scale = shared.scale_for(height_m, focal)
+
+    def one_at_a_time() -> None:
+        for _ in range(calls * cores):
+            shared.detect(frame, height_m, focal)
+
+    def workers() -> None:
+        with ThreadPoolExecutor(cores) as pool:
+            list(pool.map(lambda d: [d.detect(frame, height_m, focal) for _ in range(calls)], single))
+
+    def batched() -> None:
+        for _ in range(calls):
+            shared.detect_batch_scaled([frame] * cores, [scale] * cores)
+
+    ways: dict[str, Callable[[], None]] = {"one_at_a_time": one_at_a_time, "workers": workers, "batched": batched}
+    seconds: dict[str, list[float]] = {name: [] for name in ways}
+    for way in ways.values():
+        way()  # warm-up
+    for _ in range(rounds):
+        for name, way in ways.items():
+            start = time.perf_counter()
+            way()
+            seconds[name].append(time.perf_counter() - start)
+    fps = {name: calls * cores / percentile(values, 50) for name, values in seconds.items()}
+    return {"available": True, "height_m": height_m, "cores": cores, "fps": {k: round(v, 1) for k, v in fps.items()},
+            "speedup": round(fps["workers"] / fps["one_at_a_time"], 3)}
 
 
 def camera_sized(detector: Detector | RimTileDetector, frame: np.ndarray, focal: float) -> tuple[np.ndarray, float]:

@@ -143,6 +143,12 @@ def _detector(part: dict) -> list[str]:
         ms = int8["ms_p50"]
         lines.append(f"general model at {int8['height_m']:.1f} m, {int8['threads']} threads, alternating: float32 "
                      f"{_number(ms['float32'])} ms, INT8 {_number(ms['int8'])} ms p50 (speedup {_number(int8['speedup'])})")
+    workers = part.get("workers", {})
+    if workers.get("available"):
+        fps = workers["fps"]
+        lines.append(f"general model at {workers['height_m']:.1f} m on {workers['cores']} cores, alternating, frames a second: "
+                     f"one at a time {_number(fps['one_at_a_time'])}, workers {_number(fps['workers'])}, batched "
+                     f"{_number(fps['batched'])} (workers' speedup {_number(workers['speedup'])})")
     return lines
 
 

@@ -10,7 +10,9 @@ mounting height from the site's ``detectors`` list of height ranges (the paper u
       - {min_height_m: 3, max_height_m: 6, model: models/low.onnx}
       - {min_height_m: 6, max_height_m: 10, model: models/high.onnx}
 
-Without that list the shipped model, trained on renders from 3 to 10 m, covers every height.
+Without that list a camera under 5 m gets the rim tiles and one from 5 m the general model,
+trained on renders from 3 to 10 m: its INT8 copy where the detector runs on a CPU with 8-bit
+dot-product instructions, about twice as fast there (``bevflow.detect.runtime.ranges_for_host``).
 Cameras that name the same file share one loaded model.
 
 ``detector: rim-tiles`` selects the rotation-aware detector for real frames of low ceilings
@@ -26,12 +28,12 @@ from pathlib import Path
 from bevflow.detect.providers import DEFAULT_PROVIDERS
 from bevflow.detect.runtime import (
     DEFAULT_MODEL,
-    DEFAULT_RANGES,
     Detector,
     DetectorBank,
     DetectorError,
     DetectorOptions,
     HeightRange,
+    ranges_for_host,
 )
 from bevflow.detect.tiles import RIM_TILES, RimTileDetector, rim_tiles
 from bevflow.site import Site
@@ -62,7 +64,8 @@ class CameraModels:
     """One ``Detector`` per camera of ``site`` (those in ``cameras``, default all), loaded when
     this is built so a bad model name fails at start-up, not on the first frame. ``default``
     overrides the height ranges for cameras that name no model; ``ranges`` (default: the site's
-    ``detectors``, else the shipped model for every height) choose by height."""
+    ``detectors``, else the shipped ranges as this host runs them best,
+    ``bevflow.detect.runtime.ranges_for_host``) choose by height."""
 
     def __init__(
         self,
@@ -95,7 +98,7 @@ class CameraModels:
             return model(name)
 
         if ranges is None:
-            ranges = [HeightRange(r.min_height_m, r.max_height_m, r.model) for r in site.detectors or []] or DEFAULT_RANGES
+            ranges = [HeightRange(r.min_height_m, r.max_height_m, r.model) for r in site.detectors or []] or ranges_for_host(providers)
         checked = DetectorBank(ranges).ranges  # sorted, refused if they overlap; loads nothing
 
         def for_height(height_m: float) -> Detector | RimTileDetector:

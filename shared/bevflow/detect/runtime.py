@@ -27,6 +27,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from bevflow.detect.cpu import int8_dot_product
 from bevflow.detect.decoders import FORMATS, decode_centernet, decode_fastestdet, decode_yolov5, decode_yolov8, decode_yolox, guess_format, nms
 from bevflow.detect.providers import DEFAULT_PROVIDERS, plan_providers
 from bevflow.detect.rotated import radial_boxes
@@ -330,8 +331,9 @@ class DetectorBank:
 # this pair.
 LOW_CEILING_MODEL = DEFAULT_MODEL.with_name("bevflow-person-centernet-low.onnx")
 # The general model quantised to 8 bits (``bevflow.training.quantize``), as accurate on renders.
-# Not a default: on CPUs without 8-bit dot-product instructions it is slower than the original;
-# a site names it (``bevflow-person-centernet-int8``) where ``bevflow bench`` shows it faster.
+# On CPUs without 8-bit dot-product instructions it is slower than the original, so it is chosen
+# only where the CPU has them (``ranges_for_host``), or where a site file names it
+# (``bevflow-person-centernet-int8``).
 INT8_MODEL = DEFAULT_MODEL.with_name("bevflow-person-centernet-int8.onnx")
 RENDER_TRAINED_RANGES = (HeightRange(0.0, 5.0, LOW_CEILING_MODEL), HeightRange(5.0, 100.0, None))
 # What a site gets: under 5 m, where people are large in the frame and lie along its radius, the
@@ -339,3 +341,15 @@ RENDER_TRAINED_RANGES = (HeightRange(0.0, 5.0, LOW_CEILING_MODEL), HeightRange(5
 # that the render-trained models miss (docs/RESULTS.md, "Real frames"); from 5 m the general
 # model. A site file's ``detectors`` can ask for other ranges or models.
 DEFAULT_RANGES = (HeightRange(0.0, 5.0, RIM_TILES), HeightRange(5.0, 100.0, None))
+
+
+def ranges_for_host(providers: Sequence[str] = DEFAULT_PROVIDERS, int8_fast: bool | None = None) -> tuple[HeightRange, ...]:
+    """``DEFAULT_RANGES`` as this host runs them best: from 5 m the general model's INT8 copy
+    where the detector runs on the CPU alone (``providers``, short names) and the CPU has 8-bit
+    dot-product instructions (``int8_fast``; default: ``bevflow.detect.cpu``), which makes it
+    about twice as fast there (docs/BENCHMARKS.md) and as accurate on renders (model card)."""
+    on_cpu = [p.strip().lower() for p in providers] == ["cpu"]
+    fast = int8_dot_product() if int8_fast is None else int8_fast
+    if on_cpu and fast and INT8_MODEL.is_file():
+        return tuple(HeightRange(r.min_m, r.max_m, INT8_MODEL) if r.model is None else r for r in DEFAULT_RANGES)
+    return DEFAULT_RANGES

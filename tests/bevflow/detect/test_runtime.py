@@ -7,7 +7,17 @@ import numpy as np
 import pytest
 
 from bevflow.camera import FisheyeCamera
-from bevflow.detect.runtime import DEFAULT_MODEL, Detector, DetectorBank, DetectorError, HeightRange
+from bevflow.detect.cpu import int8_dot_product
+from bevflow.detect.runtime import (
+    DEFAULT_MODEL,
+    DEFAULT_RANGES,
+    INT8_MODEL,
+    Detector,
+    DetectorBank,
+    DetectorError,
+    HeightRange,
+    ranges_for_host,
+)
 from bevflow.detect.scaling import scale_factor, scaled_focal
 
 
@@ -136,3 +146,37 @@ def test_shipped_model_finds_a_rendered_person(height: float) -> None:
         cx, cy = (truth[0] + truth[2]) / 2, (truth[1] + truth[3]) / 2
         centres = (found.xyxy[:, :2] + found.xyxy[:, 2:]) / 2
         assert np.hypot(*(centres - (cx, cy)).T).min() < 0.3 * max(truth[2] - truth[0], truth[3] - truth[1]) + 2
+
+
+@pytest.mark.parametrize(
+    ("providers", "int8_fast", "general"),
+    [
+        (["cpu"], True, INT8_MODEL),  # a CPU with 8-bit dot products: the INT8 copy, twice as fast there
+        (["cpu"], False, None),  # without them it is slower: the float model
+        (["cuda", "cpu"], True, None),  # an accelerator runs the float model
+        (["CPU "], True, INT8_MODEL),
+    ],
+)
+def test_the_host_gets_the_int8_general_model_only_on_a_cpu_that_pays(providers: list[str], int8_fast: bool,
+                                                                       general: object) -> None:
+    ranges = ranges_for_host(providers, int8_fast)
+    assert [(r.min_m, r.max_m) for r in ranges] == [(r.min_m, r.max_m) for r in DEFAULT_RANGES]
+    assert ranges[0] == DEFAULT_RANGES[0]  # the rim tiles under 5 m either way
+    assert ranges[1].model == general
+
+
+@pytest.mark.parametrize(
+    ("cpuinfo", "expected"),
+    [
+        ("processor\t: 0\nflags\t\t: fpu avx2 avx512f avx512_vnni\n", True),
+        ("flags\t\t: fpu avx2 avx_vnni\n", True),
+        ("flags\t\t: fpu avx2 amx_tile amx_int8\n", True),
+        ("flags\t\t: fpu sse4_2 avx2 fma\n", False),  # AVX2 alone: INT8 measured slower
+        ("Features\t: fp asimd evtstrm asimddp\n", True),
+        ("Features\t: fp asimd evtstrm\n", False),
+        ("model name\t: avx512_vnni in a name is not a flag\n", False),
+        ("", False),
+    ],
+)
+def test_8_bit_dot_products_are_read_from_the_cpu_flags(cpuinfo: str, expected: bool) -> None:
+    assert int8_dot_product(cpuinfo) is expected

@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -141,3 +142,41 @@ def test_int8_without_the_shipped_copy_says_so(tmp_path: Path, monkeypatch: pyte
     monkeypatch.setattr(runtime, "INT8_MODEL", tmp_path / "bevflow-person-centernet-int8.onnx")
     result = bench_int8()
     assert result == {"available": False, "reason": "no bevflow-person-centernet-int8.onnx shipped beside bevflow-person-centernet.onnx"}
+
+
+class CountingDetector(FakeDetector):
+    """Counts frames and batches; with ``meeting``, each frame waits for the other worker's."""
+
+    def __init__(self, threads: int, meeting: threading.Barrier | None = None) -> None:
+        super().__init__(threads)
+        self.meeting = meeting
+        self.batches: list[int] = []
+
+    def detect(self, image: np.ndarray, height: float, focal: float) -> Boxes:
+        if self.meeting is not None:
+            self.meeting.wait(timeout=10)  # BrokenBarrierError if the workers ran one after the other
+        return super().detect(image, height, focal)
+
+    def detect_batch_scaled(self, images: list[np.ndarray], scales: list[float]) -> list[Boxes]:
+        self.batches.append(len(images))
+        return [Boxes.empty() for _ in images]
+
+
+def test_the_workers_one_at_a_time_and_batches_each_get_the_same_frames(monkeypatch: pytest.MonkeyPatch) -> None:
+    from bevflow_services.benchmarks.detector import bench_workers
+
+    monkeypatch.setattr(detector_bench, "frame_for", lambda h: (np.zeros((64, 64, 3), np.uint8), 50.0))
+    meeting, made = threading.Barrier(2), []
+
+    def make(threads: int) -> CountingDetector:
+        made.append(CountingDetector(threads, meeting if threads == 1 else None))
+        return made[-1]
+
+    result = bench_workers(cores=2, rounds=3, calls=4, make_detector=make)  # type: ignore[arg-type]
+    shared, *single = made
+    assert [d.threads for d in made] == [2, 1, 1]  # one session of both cores, one of one thread per worker
+    frames = (1 + 3) * 4 * 2  # warm-up and three rounds, 4 calls of 2 frames each
+    assert shared.calls == frames and shared.batches == [2] * (frames // 2)
+    assert [d.calls for d in single] == [frames // 2] * 2  # each worker's frames, in parallel (the meeting)
+    assert result["available"] and set(result["fps"]) == {"one_at_a_time", "workers", "batched"}
+    assert result["speedup"] == pytest.approx(result["fps"]["workers"] / result["fps"]["one_at_a_time"], rel=0.01)

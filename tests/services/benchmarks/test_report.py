@@ -62,7 +62,9 @@ def every_part() -> dict:
         "detector": {"available": True, "reason": None, "rows": [{"height_m": 3.3, "threads": 2, "frame": "369x369", "input": "256x256",
                                                                  "ms_p50": 6.2, "ms_p90": 6.3, "boxes": 13}],
                      "int8": {"available": True, "height_m": 5.5, "threads": 2, "ms_p50": {"float32": 22.6, "int8": 25.5},
-                              "speedup": 0.886}},
+                              "speedup": 0.886},
+                     "workers": {"available": True, "height_m": 5.5, "cores": 2, "speedup": 1.07,
+                                 "fps": {"one_at_a_time": 56.0, "workers": 59.9, "batched": 57.4}}},
         "live": {"latency_4_cameras": run, "detector": "simulator boxes",
                  "max_cameras": {"max_cameras": 8, "lower_bound_only": False, "probes": [
                      {"cameras": 4, "kept_up": True, "why": "kept up", "tracks_latency_p99_ms": 40.0, "frames_dropped_at_source": 0, "people": 30},
@@ -90,6 +92,8 @@ def test_every_part_has_a_table() -> None:
     text = "\n".join(console_lines(result))
     for expected in ("skipped: 1000 people on 4 cameras: 2.5 people/m²", "3.3 m, 2 threads: frame 369x369 -> input 256x256: 6.2 ms p50",
                      "general model at 5.5 m, 2 threads, alternating: float32 22.6 ms, INT8 25.5 ms p50 (speedup 0.886)",
+                     "general model at 5.5 m on 2 cores, alternating, frames a second: one at a time 56, workers 59.9, "
+                     "batched 57.4 (workers' speedup 1.07)",
                      "largest number of simulated 10 fps cameras kept up with: 8", "4 cameras, 30 people: kept up",
                      "camera folders recorded before the run, through the detector service:", "p99 900 ms",
                      "frames detected 1100, skipped by the detector 90", "largest number of recorded 10 fps cameras kept up with: 1",

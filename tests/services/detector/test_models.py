@@ -190,3 +190,15 @@ def test_a_site_height_table_names_the_render_trained_pair_or_rim_tiles(table: s
     site = parse_site((SITE % "null") + f"detectors: {table}\n")
     models = CameraModels(site, load=FakeDetector).models()
     assert (models["low"], models["high"]) == (low, high)
+
+
+@pytest.mark.parametrize(("providers", "int8_fast", "high"), [(["cpu"], True, INT8_MODEL), (["cpu"], False, DEFAULT_MODEL),
+                                                              (["openvino", "cpu"], True, DEFAULT_MODEL)])
+def test_a_site_without_a_height_table_gets_the_int8_general_model_where_the_cpu_makes_it_pay(
+        monkeypatch: pytest.MonkeyPatch, providers: list[str], int8_fast: bool, high: Path) -> None:
+    from bevflow.detect import runtime
+
+    monkeypatch.setattr(runtime, "int8_dot_product", lambda: int8_fast)
+    models = CameraModels(parse_site(SITE % "rim-tiles"), providers=providers, load=FakeDetector)  # type: ignore[arg-type]
+    assert models["high"].model_path == high
+    assert models.models()["high"] == high.name  # as the start-up line and /api/health say
