@@ -99,7 +99,7 @@ def markdown(result: dict, command: str, note: str = "") -> str:
         out += [f"- {note}"]
     out += ["", "Wall-clock times include waiting for a core when other work shares the machine; the CPU",
             "times (of the timed thread) do not, and are the steadier figure on a busy machine.", "",
-            "## Headline numbers", "", "| key | value | target (issue 8) | verdict / why null |", "|---|---|---|---|"]
+            "## Headline numbers", "", "| key | value | target | verdict / why null |", "|---|---|---|---|"]
     out += [f"| `{k}` | {v} | {t} | {n} |" for k, v, t, n in headline_rows(result)]
     for name in PART_TABLES:
         if name in result["parts"]:
