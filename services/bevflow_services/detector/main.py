@@ -316,11 +316,3 @@ def _detect_one(worker: FrameDetector, stats: bus.BusStats, camera: str, key: st
         stats.count("handler_errors")
         log.exception("could not run the detector on %s/%d; skipping it", camera, frame.header.seq)
     return None
-    try:
-        return worker.detect(frame.header, frame.image)
-    except BadFrame as exc:
-        stats.reject(key, exc.reason, exc.detail)
-    except Exception:  # a bug on one frame must not stop the other cameras
-        stats.count("handler_errors")
-        log.exception("could not run the detector on %s/%d; skipping it", camera, frame.header.seq)
-    return None
