@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import signal
 import threading
 from collections.abc import Callable, Iterator
@@ -46,6 +47,11 @@ def periodically(every_s: float, action: Callable[[], object], name: str) -> Ite
     finally:
         stop.set()
         thread.join()
+
+
+def usable_cores() -> int:
+    """The CPU cores this process may run on (its affinity, where the system tells)."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
 @contextmanager

@@ -17,6 +17,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Generic, TypeVar
 
+from bevflow_services.runtime import usable_cores
+
 R = TypeVar("R")
 
 
@@ -80,7 +82,7 @@ def machine() -> dict[str, object]:
         load = []
     return {
         "cpus": os.cpu_count(),
-        "cpus_usable": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count(),
+        "cpus_usable": usable_cores(),
         "cpu_model": model,
         "load_average_1_5_15": load,
         "python": platform.python_version(),

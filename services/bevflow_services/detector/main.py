@@ -19,18 +19,17 @@ sequence numbers show as dropped frames in the gateway's camera health. Bad fram
 payloads, a size that does not fit the camera, undecodable JPEG) are logged, counted and skipped.
 
 Workers: on the CPU, several frames each on one ONNX Runtime thread get more frames through than
-one frame at a time on all the threads (a 5.5 m camera's window on 2 cores: 82–84 against 70–71
-frames a second, ``docs/BENCHMARKS.md``): a small network's layers leave a session's threads
-waiting on each other, and the Python around each inference runs on one core. So by default
-there is a worker per usable core (at most one per camera), and the cores are shared out among
-them as each inference's threads.
+one frame at a time on all the threads (6–20 % more on 2 cores: ``bevflow bench``,
+``detector_workers_speedup_5_5m_2_cores``, ``docs/BENCHMARKS.md``): a small network's layers leave
+a session's threads waiting on each other, and the Python around each inference runs on one core.
+So by default there is a worker per usable core (at most one per camera), and the cores are shared
+out among them as each inference's threads.
 """
 
 from __future__ import annotations
 
 import argparse
 import logging
-import os
 import threading
 import time
 from collections import Counter
@@ -53,7 +52,7 @@ from bevflow.site import Site
 from bevflow_services import bus
 from bevflow_services.detector.models import CameraModels
 from bevflow_services.detector.schedule import ReadyCameras
-from bevflow_services.runtime import UserError, service_site, stop_on_signals
+from bevflow_services.runtime import UserError, service_site, stop_on_signals, usable_cores
 from bevflow_services.service_metrics import MetricsBook, reporting
 
 log = logging.getLogger(__name__)
@@ -216,11 +215,6 @@ def main(args: argparse.Namespace) -> int:
             publication.close()
         session.close()
     return 0
-
-
-def usable_cores() -> int:
-    """The CPU cores this process may run on."""
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
 def share_cores(cameras: int, workers: int | None, threads: int | None, cores: int) -> tuple[int, int]:

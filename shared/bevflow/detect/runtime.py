@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 
 from bevflow.detect.cpu import int8_dot_product
 from bevflow.detect.decoders import FORMATS, decode_centernet, decode_fastestdet, decode_yolov5, decode_yolov8, decode_yolox, guess_format, nms
-from bevflow.detect.providers import DEFAULT_PROVIDERS, plan_providers
+from bevflow.detect.providers import DEFAULT_PROVIDERS, check_providers, plan_providers
 from bevflow.detect.rotated import radial_boxes
 from bevflow.detect.scaling import scale_factor
 from bevflow.detect.tiles import RIM_TILES, RimTileDetector, load_rim_tiles
@@ -348,7 +348,7 @@ def ranges_for_host(providers: Sequence[str] = DEFAULT_PROVIDERS, int8_fast: boo
     where the detector runs on the CPU alone (``providers``, short names) and the CPU has 8-bit
     dot-product instructions (``int8_fast``; default: ``bevflow.detect.cpu``), which makes it
     about twice as fast there (docs/BENCHMARKS.md) and as accurate on renders (model card)."""
-    on_cpu = [p.strip().lower() for p in providers] == ["cpu"]
+    on_cpu = check_providers(providers) == ["cpu"]
     fast = int8_dot_product() if int8_fast is None else int8_fast
     if on_cpu and fast and INT8_MODEL.is_file():
         return tuple(HeightRange(r.min_m, r.max_m, INT8_MODEL) if r.model is None else r for r in DEFAULT_RANGES)
