@@ -97,4 +97,5 @@ def test_dockerfile_gives_the_data_folder_to_its_user_and_checks_health() -> Non
     assert re.search(r"chown bevflow:bevflow /data", DOCKERFILE[:user])
     assert DOCKERFILE.index('VOLUME ["/data"]') > user
     assert 'CMD ["bevflow", "healthcheck", "container"]' in DOCKERFILE
-    assert 'pip install -c constraints.txt ".[all]"' in DOCKERFILE
+    assert "ARG BEVFLOW_EXTRAS=all\n" in DOCKERFILE  # every extra unless the build names others
+    assert 'pip install -c constraints.txt ".[${BEVFLOW_EXTRAS}]"' in DOCKERFILE

@@ -1,7 +1,8 @@
 """Which of bevflow's pip extras installs each optional module, and the line that says so.
 
-The core library (``bevflow``) and ``bevflow evaluate`` need only the required dependencies; the
-live system and its parts need the extras of pyproject.toml's [project.optional-dependencies].
+The core library (``bevflow``) and ``bevflow evaluate`` need only the required dependencies, but
+for the person detector, which needs one ONNX Runtime build (``RUNTIME_EXTRAS``); the live system
+and its parts need the extras of pyproject.toml's [project.optional-dependencies].
 A ``ModuleNotFoundError`` for a module listed here means its extra is not installed, which the
 ``bevflow`` command says in one line; any other missing module is a bug and stays an error.
 
@@ -9,11 +10,17 @@ A ``ModuleNotFoundError`` for a module listed here means its extra is not instal
     'services'
     >>> install_hint("reports")
     "needs the 'reports' extra: pip install 'bevflow[reports]'"
+    >>> install_hint("cpu")
+    "needs ONNX Runtime: pip install 'bevflow[cpu]' (or one of 'bevflow[gpu]', 'bevflow[openvino]' instead)"
 """
 
 from __future__ import annotations
 
 import importlib.util
+
+# The builds of ONNX Runtime, one extra each, all installing the ``onnxruntime`` module: a host
+# installs exactly one. The first is the default (in ``all``).
+RUNTIME_EXTRAS = ("cpu", "gpu", "openvino")
 
 # Top-level import name -> the extra that installs it. tests/test_packaging.py checks this against
 # pyproject.toml, so an optional dependency added there cannot be forgotten here.
@@ -31,6 +38,7 @@ EXTRA_OF_MODULE: dict[str, str] = {
     "viser": "view3d",
     "psycopg": "postgres",
     "reportlab": "reports",
+    "onnxruntime": "cpu",  # or another of RUNTIME_EXTRAS
     "torch": "train",
     "onnx": "train",
     "onnxscript": "train",
@@ -44,6 +52,9 @@ def extra_for(error: ModuleNotFoundError) -> str | None:
 
 def install_hint(extra: str) -> str:
     """How a message ends that names a missing extra."""
+    if extra in RUNTIME_EXTRAS:
+        others = ", ".join(f"'bevflow[{e}]'" for e in RUNTIME_EXTRAS if e != extra)
+        return f"needs ONNX Runtime: pip install 'bevflow[{extra}]' (or one of {others} instead)"
     return f"needs the '{extra}' extra: pip install 'bevflow[{extra}]'"
 
 

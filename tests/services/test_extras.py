@@ -21,6 +21,9 @@ OPTIONAL = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["opti
 NOT_IMPORTED = {"test", "all"}
 # Extras a site's live system does not run: training happens elsewhere.
 NOT_FOR_SITES = {"train"}
+# The ONNX Runtime builds that replace the default (CPU) one, so are never installed beside it
+# here: the module each installs, as checked by installing them on their own.
+REPLACEMENT_RUNTIMES = {"onnxruntime-gpu": {"onnxruntime"}, "onnxruntime-openvino": {"onnxruntime"}}
 
 
 def _name(requirement: str) -> str:
@@ -44,6 +47,8 @@ def _installed_modules() -> dict[str, set[str]]:
 def _modules_of(distribution: str) -> set[str]:
     """The top-level modules ``distribution`` installs; its name as a module where it is not
     installed here (the train extra's torch and onnx are not in the test environment)."""
+    if distribution in REPLACEMENT_RUNTIMES:
+        return REPLACEMENT_RUNTIMES[distribution]
     return _installed_modules().get(distribution) or {distribution.replace("-", "_")}
 
 
@@ -61,15 +66,19 @@ OPTIONAL_DEPENDENCIES = [(extra, _name(r)) for extra, reqs in OPTIONAL.items() i
 
 @pytest.mark.parametrize(("extra", "distribution"), OPTIONAL_DEPENDENCIES)
 def test_each_optional_dependency_maps_to_its_extra(extra: str, distribution: str) -> None:
+    # every ONNX Runtime build's module is named by the default build's extra, which a hint names first
+    expected = extras.RUNTIME_EXTRAS[0] if extra in extras.RUNTIME_EXTRAS else extra
     for module in _modules_of(distribution):
-        assert extras.EXTRA_OF_MODULE.get(module) == extra, (
-            f"{distribution} ({extra}) installs '{module}': map it to '{extra}' in bevflow_services/extras.py")
+        assert extras.EXTRA_OF_MODULE.get(module) == expected, (
+            f"{distribution} ({extra}) installs '{module}': map it to '{expected}' in bevflow_services/extras.py")
 
 
 @pytest.mark.parametrize(("module", "extra"), sorted(extras.EXTRA_OF_MODULE.items()))
 def test_each_mapped_module_comes_with_its_extra(module: str, extra: str) -> None:
     assert extra in OPTIONAL and extra not in NOT_IMPORTED, f"'{module}' maps to '{extra}', which pyproject.toml lacks"
     listed = [_name(r) for r in OPTIONAL[extra]]
+    if extra in extras.RUNTIME_EXTRAS:
+        listed = [_name(r) for runtime in extras.RUNTIME_EXTRAS for r in OPTIONAL[runtime]]
     distributions = listed + [required for d in listed for required in _requires(d)]
     assert module in set().union(*map(_modules_of, distributions)), f"no distribution of the '{extra}' extra, nor one they require, installs '{module}'"
 
@@ -77,14 +86,42 @@ def test_each_mapped_module_comes_with_its_extra(module: str, extra: str) -> Non
 def test_all_is_every_extra_a_site_runs_and_the_tests_install_it() -> None:
     gathered = re.fullmatch(r"bevflow\[(.+)\]", OPTIONAL["all"][0])
     assert len(OPTIONAL["all"]) == 1 and gathered
-    assert sorted(gathered.group(1).split(",")) == sorted(set(OPTIONAL) - NOT_IMPORTED - NOT_FOR_SITES)
+    other_runtimes = set(extras.RUNTIME_EXTRAS[1:])  # all detects on the default build, the CPU's
+    assert sorted(gathered.group(1).split(",")) == sorted(set(OPTIONAL) - NOT_IMPORTED - NOT_FOR_SITES - other_runtimes)
     assert "bevflow[all]" in OPTIONAL["test"]
+
+
+def _runtimes_in(requirements: list[str], seen: frozenset[str] = frozenset()) -> set[str]:
+    """The runtime extras that ``requirements`` install, following ``bevflow[...]`` references."""
+    found: set[str] = set()
+    for requirement in requirements:
+        gathered = re.fullmatch(r"bevflow\[(.+)\]", requirement)
+        for extra in gathered.group(1).split(",") if gathered else []:
+            if extra in extras.RUNTIME_EXTRAS:
+                found.add(extra)
+            elif extra not in seen:
+                found |= _runtimes_in(OPTIONAL[extra], seen | {extra})
+    return found
+
+
+@pytest.mark.parametrize("extra", sorted(OPTIONAL))
+def test_no_extra_installs_two_onnx_runtime_builds(extra: str) -> None:
+    """Each build installs the ``onnxruntime`` module: two would overwrite each other's files."""
+    runtimes = _runtimes_in(OPTIONAL[extra]) | ({extra} & set(extras.RUNTIME_EXTRAS))
+    assert len(runtimes) <= 1, f"'{extra}' installs {sorted(runtimes)}"
+    assert runtimes <= {extra, extras.RUNTIME_EXTRAS[0]}, f"'{extra}' installs {sorted(runtimes)} rather than the default"
+
+
+def test_the_required_dependencies_hold_no_onnx_runtime_build() -> None:
+    required = {_name(r) for r in tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["dependencies"]}
+    builds = {_name(r) for runtime in extras.RUNTIME_EXTRAS for r in OPTIONAL[runtime]}
+    assert not required & builds, "a build in the required set could not be replaced by another's extra"
 
 
 @pytest.mark.parametrize(
     ("missing", "extra"),
     [("zenoh", "services"), ("zenoh.ext", "services"), ("reportlab.graphics", "reports"), ("psycopg", "postgres"),
-     ("torch", "train"), ("bevflow_services.no_such_module", None), ("not_a_real_package_for_bevflow_tests", None), (None, None)],
+     ("torch", "train"), ("onnxruntime", "cpu"), ("onnxruntime.quantization", "cpu"), ("bevflow_services.no_such_module", None), ("not_a_real_package_for_bevflow_tests", None), (None, None)],
 )
 def test_the_extra_of_a_missing_module(missing: str | None, extra: str | None) -> None:
     assert extras.extra_for(ModuleNotFoundError(f"No module named {missing!r}", name=missing)) == extra

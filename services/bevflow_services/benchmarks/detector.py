@@ -22,7 +22,7 @@ import functools
 import importlib.util
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -131,16 +131,22 @@ def bench_int8(height_m: float = 5.5, threads: int = 2, rounds: int = 10, calls:
         return {"available": False, "reason": f"no {INT8_MODEL.name} shipped beside {DEFAULT_MODEL.name}"}
     load = make_detector or (lambda path: Detector(path, threads=threads))
     frame, focal = frame_for(height_m)
-    detectors = {"float32": load(DEFAULT_MODEL), "int8": load(INT8_MODEL)}
+    ms = alternately({"float32": load(DEFAULT_MODEL), "int8": load(INT8_MODEL)}, frame, height_m, focal, rounds, calls)
+    return {"available": True, "height_m": height_m, "threads": threads, "ms_p50": {k: round(v, 2) for k, v in ms.items()},
+            "speedup": round(ms["float32"] / ms["int8"], 3) if ms["int8"] > 0 else None}
+
+
+def alternately(detectors: Mapping[str, Detector | RimTileDetector], frame: np.ndarray, height_m: float, focal: float,
+                rounds: int, calls: int) -> dict[str, float]:
+    """Each detector's median ms per ``frame``, timed in alternating rounds of ``calls`` calls
+    each (after one warm-up call) so that all see the same machine load."""
     times: dict[str, list[float]] = {name: [] for name in detectors}
     for detector in detectors.values():
         detector.detect(frame, height_m, focal)  # warm-up
     for _ in range(rounds):
         for name, detector in detectors.items():
             times[name].extend(time_calls(functools.partial(detector.detect, frame, height_m, focal), calls).wall_s)
-    ms = {name: percentile([t * 1e3 for t in values], 50) for name, values in times.items()}
-    return {"available": True, "height_m": height_m, "threads": threads, "ms_p50": {k: round(v, 2) for k, v in ms.items()},
-            "speedup": round(ms["float32"] / ms["int8"], 3) if ms["int8"] > 0 else None}
+    return {name: percentile([t * 1e3 for t in values], 50) for name, values in times.items()}
 
 
 def bench_workers(height_m: float = 5.5, cores: int = 2, rounds: int = 4, calls: int = 6,

@@ -58,10 +58,12 @@ def run(args: argparse.Namespace) -> int:
     from bevflow_services.launcher import TEMPORARY_DB, ServiceGroup, port_free, start_pipeline
 
     extras.require("services")  # here, not as each service it starts fails on its own
+    boxes, ingest_args = _boxes(args)
+    if boxes == "rendered":
+        extras.require(extras.RUNTIME_EXTRAS[0])  # the detector's ONNX Runtime, any build
     for port in (args.port, args.port + 1):
         if not port_free(port):
             raise UserError(f"port {port} is already in use; choose another with --port")
-    boxes, ingest_args = _boxes(args)
     if args.no_history_db and args.history_db:
         raise UserError("--history-db and --no-history-db contradict each other; give one of them")
     history_db = None if args.no_history_db else (args.history_db or TEMPORARY_DB)

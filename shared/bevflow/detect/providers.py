@@ -11,6 +11,14 @@ TensorRT, ``onnxruntime-openvino``); INSTALL.md says how to swap one in.
 >>> plan = plan_providers(["cuda", "cpu"], ["AzureExecutionProvider", "CPUExecutionProvider"])
 >>> plan.use, plan.unavailable
 (['CPUExecutionProvider'], ['cuda'])
+
+A build can offer a provider that then fails to load (``onnxruntime-gpu`` on a host without the
+driver or CUDA's libraries): ONNX Runtime falls back to the CPU on its own, and ``not_loaded``
+names what the session went without.
+
+>>> plan = plan_providers(["cuda"], ["CUDAExecutionProvider", "CPUExecutionProvider"])
+>>> plan.not_loaded(["CPUExecutionProvider"])
+['cuda']
 """
 
 from __future__ import annotations
@@ -34,6 +42,15 @@ class ProviderPlan:
 
     use: list[str]
     unavailable: list[str]
+
+    def not_loaded(self, loaded: Sequence[str]) -> list[str]:
+        """The short names of the providers planned but missing from a session's ``loaded`` ones."""
+        short = {full: name for name, full in PROVIDERS.items()}
+        return [short[full] for full in self.use if full not in loaded]
+
+    def needs_cuda(self) -> bool:
+        """Whether a planned provider loads CUDA's libraries (CUDA, TensorRT)."""
+        return any(PROVIDERS[name] in self.use for name in ("cuda", "tensorrt"))
 
     def describe(self) -> str:
         """One log line: what runs, and what was asked for but is missing."""

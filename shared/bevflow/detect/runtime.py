@@ -17,6 +17,9 @@ their padded sizes match (cameras at the same height), which amortises the per-c
 
 from __future__ import annotations
 
+import contextlib
+import functools
+import io
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -231,11 +234,36 @@ def _load_session(path: Path, threads: int, providers: Sequence[str] = DEFAULT_P
     # cores the detector shares (rendering, tracking, other cameras) that burned ~50 % more CPU
     # per frame with 2 threads and made each frame slower, not faster.
     options.add_session_config_entry("session.intra_op.allow_spinning", "0")
+    if plan.needs_cuda():
+        _preload_cuda_libraries()
     try:
-        session: InferenceSession = ort.InferenceSession(str(path), options, providers=plan.use)
-        return session
+        created = ort.InferenceSession(str(path), options, providers=plan.use)
     except Exception as exc:  # onnxruntime raises its own exception types
         raise DetectorError(f"cannot load detector model {path}: {exc}") from None
+    loaded = list(created.get_providers())
+    missed = plan.not_loaded(loaded)
+    if missed:
+        _log.warning("%s: %s offered by this onnxruntime build but did not load (ONNX Runtime's message "
+                     "above says why: a driver or library missing?); runs on %s", path.name, ", ".join(missed),
+                     ", ".join(loaded))
+    session: InferenceSession = created
+    return session
+
+
+@functools.cache
+def _preload_cuda_libraries() -> None:
+    """Load CUDA and cuDNN from NVIDIA's pip packages (what the gpu extra installs) before a CUDA
+    or TensorRT session, as ONNX Runtime asks; on a host with them installed system-wide it finds
+    those. Once a process."""
+    import onnxruntime as ort
+
+    preload = getattr(ort, "preload_dlls", None)  # in onnxruntime since 1.21
+    if preload is not None:
+        printed = io.StringIO()
+        with contextlib.redirect_stdout(printed):  # it prints each library it cannot find
+            preload()
+        if printed.getvalue().strip():
+            _log.warning("loading CUDA's libraries: %s", "; ".join(printed.getvalue().split("\n")).strip("; "))
 
 
 def _model_zoom(session: InferenceSession) -> float:

@@ -7,6 +7,7 @@ import logging
 import onnxruntime
 import pytest
 
+from bevflow.detect import runtime
 from bevflow.detect.providers import plan_providers
 from bevflow.detect.runtime import Detector
 
@@ -42,6 +43,33 @@ def test_a_missing_accelerator_falls_back_to_the_cpu_with_a_warning(caplog: pyte
         detector = Detector(providers=["cuda", "cpu"])
     assert detector.providers == [CPU]
     assert any("not available in this onnxruntime build: cuda" in m for m in caplog.messages)
+
+
+def test_an_offered_accelerator_that_does_not_load_is_reported(monkeypatch: pytest.MonkeyPatch,
+                                                               caplog: pytest.LogCaptureFixture) -> None:
+    """onnxruntime-gpu without the driver or CUDA's libraries: the build offers CUDA, the session
+    falls back to the CPU on its own, and the log says so (checked with the real build too)."""
+    real = onnxruntime.InferenceSession
+    preloaded: list[bool] = []
+    monkeypatch.setattr(onnxruntime, "get_available_providers", lambda: [TRT, CUDA, CPU])
+    monkeypatch.setattr(onnxruntime, "InferenceSession", lambda path, options, providers: real(path, options, providers=[CPU]))
+    monkeypatch.setattr(onnxruntime, "preload_dlls", lambda: preloaded.append(True), raising=False)
+    runtime._preload_cuda_libraries.cache_clear()
+    with caplog.at_level(logging.WARNING, logger="bevflow.detect.runtime"):
+        detector = Detector(providers=["tensorrt", "cuda", "cpu"])
+    runtime._preload_cuda_libraries.cache_clear()
+    assert detector.providers == [CPU] and preloaded == [True]
+    assert any("tensorrt, cuda offered by this onnxruntime build but did not load" in m and m.endswith("runs on " + CPU)
+               for m in caplog.messages)
+
+
+def test_the_cpu_alone_loads_no_cuda_libraries(monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
+    preloaded: list[bool] = []
+    monkeypatch.setattr(onnxruntime, "preload_dlls", lambda: preloaded.append(True), raising=False)
+    runtime._preload_cuda_libraries.cache_clear()
+    with caplog.at_level(logging.WARNING, logger="bevflow.detect.runtime"):
+        Detector(providers=["cpu"])
+    assert preloaded == [] and not caplog.messages
 
 
 def test_the_list_reaches_the_session(monkeypatch: pytest.MonkeyPatch) -> None:

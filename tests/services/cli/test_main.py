@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from bevflow_services.extras import EXTRA_OF_MODULE
+from bevflow_services.extras import EXTRA_OF_MODULE, install_hint
 
 WITHOUT = """
 import sys
@@ -44,6 +44,9 @@ MISSING_EXTRAS = [
     (["argon2"], ["users", "--db", "users.db", "list"], "bevflow users", "services"),
     (["psycopg"], ["users", "--db", "postgresql://bevflow@127.0.0.1:9/none", "list"], "bevflow users", "postgres"),
     (["torch"], ["train-detector", "export", "--checkpoint", "c.pt", "--out", "m.onnx"], "bevflow train-detector", "train"),
+    (["onnxruntime"], ["evaluate", "--suite", "paper", "--detector", "--frames-scale", "0.01", "--jobs", "1"],
+     "bevflow evaluate", "cpu"),
+    (["onnxruntime"], ["demo"], "bevflow demo", "cpu"),
 ]
 
 
@@ -53,7 +56,7 @@ def test_a_missing_extra_is_one_line_naming_it(tmp_path: Path, missing: list[str
                                                extra: str) -> None:
     result = bevflow_without(missing, argv, tmp_path)
     assert (result.returncode, result.stdout) == (2, "")
-    assert result.stderr == f"{command} needs the '{extra}' extra: pip install 'bevflow[{extra}]'\n"
+    assert result.stderr == f"{command} {install_hint(extra)}\n"
 
 
 @pytest.mark.parametrize(

@@ -1,0 +1,80 @@
+"""The detector on other ONNX Runtime execution providers against the CPU's own, in one process.
+
+Each case (the general model and its INT8 copy at 5.5 m, the rim tiles at 3.3 m on a real
+camera's 2048² frame) is loaded once per provider list and timed in alternating rounds
+(``detector.alternately``), so every list sees the same machine load; the CPU alone is always the
+first list, the baseline. It measures what the installed build offers: run it in an install with
+the ``openvino`` or ``gpu`` extra (docs/INSTALL.md). A list whose accelerator did not load runs on
+the CPU, and its row says so (``loaded``), so a fallback is never timed as the accelerator.
+
+    python -m bevflow_services.benchmarks.providers openvino,cpu [cuda,cpu ...] [--threads 2]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
+
+from bevflow.detect.providers import check_providers
+
+from bevflow_services.benchmarks.detector import alternately, camera_sized, frame_for
+
+if TYPE_CHECKING:
+    from bevflow.detect.runtime import Detector
+    from bevflow.detect.tiles import RimTileDetector
+
+# (case, camera height m): the models the detector serves by default, and the INT8 copy.
+CASES = (("general model, float32", 5.5), ("general model, INT8", 5.5), ("rim tiles", 3.3))
+BASELINE = ("cpu",)
+
+MakeDetector = Callable[[str, Sequence[str], int], "Detector | RimTileDetector"]
+
+
+def make_detector(case: str, providers: Sequence[str], threads: int) -> Detector | RimTileDetector:
+    """The shipped detector of ``case`` on ``providers``."""
+    from bevflow.detect.runtime import DEFAULT_MODEL, INT8_MODEL, Detector
+    from bevflow.detect.tiles import load_rim_tiles
+
+    if case == "rim tiles":
+        return load_rim_tiles(threads, providers=providers)
+    return Detector(INT8_MODEL if "INT8" in case else DEFAULT_MODEL, threads=threads, providers=providers)
+
+
+def loaded_providers(detector: Detector | RimTileDetector) -> list[str]:
+    """The providers a detector's session runs on (a rim-tile detector: its tiles' model's)."""
+    return list(getattr(getattr(detector, "tile_detector", detector), "providers", []))
+
+
+def bench_providers(candidates: Sequence[Sequence[str]], threads: int = 2, rounds: int = 10, calls: int = 3,
+                    make: MakeDetector = make_detector) -> list[dict]:
+    """One row per case: median ms per frame on each provider list (the CPU's first) and the
+    providers each list's sessions loaded."""
+    lists = [BASELINE, *(tuple(check_providers(c)) for c in candidates if tuple(check_providers(c)) != BASELINE)]
+    rows = []
+    for case, height in CASES:
+        detectors = {",".join(names): make(case, names, threads) for names in lists}
+        frame, focal = camera_sized(next(iter(detectors.values())), *frame_for(height))
+        ms = alternately(detectors, frame, height, focal, rounds, calls)
+        rows.append({"case": case, "height_m": height, "threads": threads, "frame": f"{frame.shape[1]}x{frame.shape[0]}",
+                     "ms_p50": {k: round(v, 2) for k, v in ms.items()},
+                     "loaded": {k: loaded_providers(d) for k, d in detectors.items()}})
+    return rows
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description="The detector on execution providers against the CPU's, alternately.")
+    parser.add_argument("providers", nargs="+", help="provider lists to time, e.g. openvino,cpu cuda,cpu")
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--rounds", type=int, default=10, help="alternating rounds of 3 calls each")
+    args = parser.parse_args(argv)
+    try:
+        candidates = [check_providers(text.split(",")) for text in args.providers]
+    except ValueError as exc:
+        parser.error(str(exc))
+    print(json.dumps(bench_providers(candidates, args.threads, args.rounds), indent=1))
+
+
+if __name__ == "__main__":
+    main()

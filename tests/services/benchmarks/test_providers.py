@@ -1,0 +1,71 @@
+"""The providers benchmark: every case on every list, the CPU first, what loaded reported."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import pytest
+
+from bevflow.detections import Boxes
+
+from bevflow_services.benchmarks import providers as providers_bench
+from bevflow_services.benchmarks.providers import CASES, bench_providers, loaded_providers
+
+
+class StandIn:
+    """A detector whose session ran on ``providers``; counts its calls."""
+
+    def __init__(self, providers: Sequence[str]) -> None:
+        self.providers = list(providers)
+        self.calls = 0
+
+    def detect(self, image: np.ndarray, height: float, focal: float) -> Boxes:
+        self.calls += 1
+        return Boxes(xyxy=np.zeros((0, 4)))
+
+
+@pytest.fixture(autouse=True)
+def small_frames(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(providers_bench, "frame_for", lambda h: (np.zeros((64, 64, 3), np.uint8), 20.0))
+    monkeypatch.setattr(providers_bench, "camera_sized", lambda detector, frame, focal: (frame, focal))
+
+
+@pytest.mark.parametrize(
+    ("candidates", "lists"),
+    [
+        ([["openvino", "cpu"]], ["cpu", "openvino,cpu"]),
+        ([["CUDA", " cpu"], ["tensorrt", "cuda"]], ["cpu", "cuda,cpu", "tensorrt,cuda"]),
+        ([["cpu"]], ["cpu"]),  # the baseline is timed once
+        ([], ["cpu"]),
+    ],
+)
+def test_every_case_is_timed_on_every_list_the_cpu_first(candidates: list[list[str]], lists: list[str]) -> None:
+    made: list[StandIn] = []
+
+    def make(case: str, names: Sequence[str], threads: int) -> StandIn:
+        # an accelerator that "did not load" runs on the CPU, as ONNX Runtime falls back
+        made.append(StandIn(["CPUExecutionProvider"] if "cuda" in names else [f"{names[0]} session"]))
+        return made[-1]
+
+    rows = bench_providers(candidates, threads=2, rounds=2, calls=3, make=make)  # type: ignore[arg-type]
+    assert [(r["case"], r["height_m"]) for r in rows] == list(CASES)
+    for row in rows:
+        assert list(row["ms_p50"]) == lists and all(ms >= 0 for ms in row["ms_p50"].values())
+        assert list(row["loaded"]) == lists
+    assert all(d.calls == 1 + 2 * 3 for d in made)  # a warm-up, then every round's calls
+    if "cuda,cpu" in lists:
+        assert rows[0]["loaded"]["cuda,cpu"] == ["CPUExecutionProvider"]
+
+
+def test_an_unknown_provider_is_refused_before_anything_loads() -> None:
+    with pytest.raises(ValueError, match="choose from tensorrt, cuda, openvino, cpu"):
+        bench_providers([["gpu"]], make=lambda *a: pytest.fail("nothing may load"))
+
+
+def test_a_rim_tile_detector_reports_its_tiles_providers() -> None:
+    class Tiles:
+        tile_detector = StandIn(["OpenVINOExecutionProvider", "CPUExecutionProvider"])
+
+    assert loaded_providers(Tiles()) == ["OpenVINOExecutionProvider", "CPUExecutionProvider"]  # type: ignore[arg-type]
+    assert loaded_providers(StandIn(["CPUExecutionProvider"])) == ["CPUExecutionProvider"]  # type: ignore[arg-type]
