@@ -19,6 +19,7 @@ from bevflow_services.cli.serve import load_service, parse_service_args, service
 ROOT = Path(__file__).resolve().parents[1]
 COMPOSE = yaml.safe_load((ROOT / "compose.yaml").read_text())
 SITE_OVERRIDE = yaml.safe_load((ROOT / "docker" / "compose.site.yaml").read_text())
+GPU_OVERRIDE = yaml.safe_load((ROOT / "docker" / "compose.gpu.yaml").read_text())
 DOCKERFILE = (ROOT / "docker" / "Dockerfile").read_text()
 SERVICES = sorted(COMPOSE["services"])
 # The bus in plain text and the 3D view (no login) stay inside the compose network.
@@ -84,6 +85,19 @@ def test_site_override_replaces_the_site_of_every_service() -> None:
     ingest = SITE_OVERRIDE["services"]["ingest"]["command"]
     assert "--simulate" not in ingest
     parse_service_args(service_parser("ingest", load_service("ingest")), ingest[2:])
+
+
+def test_gpu_override_builds_the_detector_its_own_image_on_the_gpu() -> None:
+    assert set(GPU_OVERRIDE["services"]) == {"detector"}
+    detector = GPU_OVERRIDE["services"]["detector"]
+    assert detector["build"]["args"]["BEVFLOW_EXTRAS"] == "services,gpu"
+    assert detector["build"]["dockerfile"] == COMPOSE["services"]["detector"]["build"]["dockerfile"]
+    assert detector["image"] != COMPOSE["services"]["detector"]["image"]  # the CPU image stays as it is
+    assert detector["deploy"]["resources"]["reservations"]["devices"] == [{"driver": "nvidia", "count": 1, "capabilities": ["gpu"]}]
+    command = detector["command"]
+    assert command[:2] == ["serve", "detector"] and command[2:8] == COMPOSE["services"]["detector"]["command"][2:8]
+    args = parse_service_args(service_parser("detector", load_service("detector")), command[2:])
+    assert args.providers == "cuda,cpu"
 
 
 def test_dockerfile_copies_only_what_exists() -> None:
