@@ -51,7 +51,8 @@ def bench_providers(candidates: Sequence[Sequence[str]], threads: int = 2, round
                     make: MakeDetector = make_detector) -> list[dict]:
     """One row per case: median ms per frame on each provider list (the CPU's first) and the
     providers each list's sessions loaded."""
-    lists = [BASELINE, *(tuple(check_providers(c)) for c in candidates if tuple(check_providers(c)) != BASELINE)]
+    wanted = dict.fromkeys(tuple(check_providers(c)) for c in candidates)  # each list once, in order
+    lists = [BASELINE, *(names for names in wanted if names != BASELINE)]
     rows = []
     for case, height in CASES:
         detectors = {",".join(names): make(case, names, threads) for names in lists}
@@ -70,10 +71,10 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--rounds", type=int, default=10, help="alternating rounds of 3 calls each")
     args = parser.parse_args(argv)
     try:
-        candidates = [check_providers(text.split(",")) for text in args.providers]
-    except ValueError as exc:
+        rows = bench_providers([text.split(",") for text in args.providers], args.threads, args.rounds)
+    except ValueError as exc:  # an unknown provider, refused before anything loads
         parser.error(str(exc))
-    print(json.dumps(bench_providers(candidates, args.threads, args.rounds), indent=1))
+    print(json.dumps(rows, indent=1))
 
 
 if __name__ == "__main__":

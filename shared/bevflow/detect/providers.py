@@ -5,8 +5,9 @@ A site names an ordered list (``detector_providers`` in the site file, ``bevflow
 installed ONNX Runtime build offers are used in that order, and the CPU always comes last, so a
 detector host without its accelerator (a driver missing, the CPU build of onnxruntime installed)
 still runs, more slowly, and says so in its log instead of failing. The builds are separate
-packages that each install the ``onnxruntime`` module (``onnxruntime-gpu`` for CUDA and
-TensorRT, ``onnxruntime-openvino``); INSTALL.md says how to swap one in.
+packages that each install the ``onnxruntime`` module, one per host (the ``cpu``, ``gpu`` and
+``openvino`` extras: ``onnxruntime``, ``onnxruntime-gpu`` for CUDA and TensorRT,
+``onnxruntime-openvino``; INSTALL.md).
 
 >>> plan = plan_providers(["cuda", "cpu"], ["AzureExecutionProvider", "CPUExecutionProvider"])
 >>> plan.use, plan.unavailable

@@ -262,8 +262,9 @@ def _preload_cuda_libraries() -> None:
         printed = io.StringIO()
         with contextlib.redirect_stdout(printed):  # it prints each library it cannot find
             preload()
-        if printed.getvalue().strip():
-            _log.warning("loading CUDA's libraries: %s", "; ".join(printed.getvalue().split("\n")).strip("; "))
+        said = [line.strip() for line in printed.getvalue().splitlines() if line.strip()]
+        if said:
+            _log.warning("loading CUDA's libraries: %s", "; ".join(said))
 
 
 def _model_zoom(session: InferenceSession) -> float:

@@ -37,6 +37,7 @@ def small_frames(monkeypatch: pytest.MonkeyPatch) -> None:
         ([["openvino", "cpu"]], ["cpu", "openvino,cpu"]),
         ([["CUDA", " cpu"], ["tensorrt", "cuda"]], ["cpu", "cuda,cpu", "tensorrt,cuda"]),
         ([["cpu"]], ["cpu"]),  # the baseline is timed once
+        ([["openvino"], ["OpenVINO"]], ["cpu", "openvino"]),  # and every list
         ([], ["cpu"]),
     ],
 )
