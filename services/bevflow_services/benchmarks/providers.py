@@ -6,6 +6,7 @@ camera's 2048² frame) is loaded once per provider list and timed in alternating
 first list, the baseline. It measures what the installed build offers: run it in an install with
 the ``openvino`` or ``gpu`` extra (docs/INSTALL.md). A list whose accelerator did not load runs on
 the CPU, and its row says so (``loaded``), so a fallback is never timed as the accelerator.
+``bevflow bench`` runs ``bench_accelerators``: every accelerator the installed build offers.
 
     python -m bevflow_services.benchmarks.providers openvino,cpu [cuda,cpu ...] [--threads 2]
 """
@@ -17,7 +18,7 @@ import json
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
-from bevflow.detect.providers import check_providers
+from bevflow.detect.providers import PROVIDERS, check_providers
 
 from bevflow_services.benchmarks.detector import alternately, camera_sized, frame_for
 
@@ -28,6 +29,7 @@ if TYPE_CHECKING:
 # (case, camera height m): the models the detector serves by default, and the INT8 copy.
 CASES = (("general model, float32", 5.5), ("general model, INT8", 5.5), ("rim tiles", 3.3))
 BASELINE = ("cpu",)
+ACCELERATORS = ("tensorrt", "cuda", "openvino")
 
 MakeDetector = Callable[[str, Sequence[str], int], "Detector | RimTileDetector"]
 
@@ -62,6 +64,26 @@ def bench_providers(candidates: Sequence[Sequence[str]], threads: int = 2, round
                      "ms_p50": {k: round(v, 2) for k, v in ms.items()},
                      "loaded": {k: loaded_providers(d) for k, d in detectors.items()}})
     return rows
+
+
+def bench_accelerators(available: Sequence[str], rounds: int = 10, calls: int = 3, make: MakeDetector = make_detector) -> dict:
+    """Each accelerator of ``available`` (``onnxruntime.get_available_providers()``) against the
+    CPU (``bench_providers``), and ``speedup``: the CPU's ms per frame of the float32 general model
+    at 5.5 m over that of the fastest accelerator whose session loaded it. Unavailable, with the
+    reason, where the build offers none (the cpu extra) or none loaded."""
+    offered = [name for name in ACCELERATORS if PROVIDERS[name] in available]
+    if not offered:
+        return {"available": False, "reason": "this onnxruntime build offers no accelerator (the cpu extra; "
+                "the gpu and openvino extras do, docs/INSTALL.md)"}
+    rows = bench_providers([[name, "cpu"] for name in offered], rounds=rounds, calls=calls, make=make)
+    general = rows[0]  # CASES[0]: the float32 general model
+    loaded = [key for key, providers in general["loaded"].items() if key != "cpu" and PROVIDERS[key.split(",")[0]] in providers]
+    if not loaded:
+        return {"available": False, "rows": rows,
+                "reason": f"{', '.join(offered)} offered by this onnxruntime build but not loaded (no device or driver?)"}
+    best = min(loaded, key=lambda key: general["ms_p50"][key])
+    return {"available": True, "rows": rows, "best": best,
+            "speedup": round(general["ms_p50"]["cpu"] / general["ms_p50"][best], 3) if general["ms_p50"][best] > 0 else None}
 
 
 def main(argv: Sequence[str] | None = None) -> None:

@@ -149,6 +149,10 @@ def _detector(part: dict) -> list[str]:
         lines.append(f"general model at {workers['height_m']:.1f} m on {workers['cores']} cores, alternating, frames a second: "
                      f"one at a time {_number(fps['one_at_a_time'])}, workers {_number(fps['workers'])}, batched "
                      f"{_number(fps['batched'])} (workers' speedup {_number(workers['speedup'])})")
+    accelerators = part.get("accelerators", {})
+    for row in accelerators.get("rows", []):
+        timed = ", ".join(f"{key} {_number(ms)} ms (loaded {', '.join(row['loaded'][key]) or '?'})" for key, ms in row["ms_p50"].items())
+        lines.append(f"{row['case']} at {row['height_m']:.1f} m, {row['threads']} threads, alternating: {timed}")
     return lines
 
 

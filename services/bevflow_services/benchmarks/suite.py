@@ -67,6 +67,7 @@ HEADLINE_KEYS: dict[str, str] = {
     "detector_ms_per_frame_3_3m_2_threads": "detector",
     "detector_int8_speedup_5_5m_2_threads": "detector",
     "detector_workers_speedup_5_5m_2_cores": "detector",
+    "detector_accelerator_speedup_5_5m_2_threads": "detector",
     "live_latency_p50_ms": "live",
     "live_latency_p99_ms": "live",
     "live_detector_latency_p50_ms": "live",
@@ -126,10 +127,13 @@ def run_tracking(s: Settings) -> tuple[Headline, dict]:
 
 def run_detector(s: Settings, model: Path | None) -> tuple[Headline, dict]:
     from bevflow_services.benchmarks.detector import bench_detector, bench_int8, bench_workers, lookup
+    from bevflow_services.benchmarks.providers import bench_accelerators
 
     result = bench_detector(model, repeats=s.detector_repeats)
     if not result["available"]:
         raise Unavailable(result["reason"], result)
+    import onnxruntime  # installed: the detector was timed
+
     # The shipped general model against its INT8 copy; a model of the user's own has none.
     int8 = bench_int8(rounds=max(1, s.detector_repeats // 3)) if model is None else {
         "available": False, "reason": "a model was given: it has no INT8 copy to time against"}
@@ -137,13 +141,17 @@ def run_detector(s: Settings, model: Path | None) -> tuple[Headline, dict]:
     # shipped general model, as the service's default runs it.
     workers = bench_workers(rounds=max(1, s.detector_repeats // 6)) if model is None else {
         "available": False, "reason": "a model was given: the workers are timed with the shipped model"}
-    result["int8"], result["workers"] = int8, workers
-    result["null_reasons"] = {key: part["reason"] for key, part in (("detector_int8_speedup_5_5m_2_threads", int8),
-                                                                     ("detector_workers_speedup_5_5m_2_cores", workers))
-                              if not part["available"]}
+    # Each accelerator the installed ONNX Runtime build offers (the gpu or openvino extra) against the CPU.
+    accelerators = bench_accelerators(onnxruntime.get_available_providers(), rounds=max(1, s.detector_repeats // 3)) \
+        if model is None else {"available": False, "reason": "a model was given: accelerators are timed with the shipped models"}
+    result["int8"], result["workers"], result["accelerators"] = int8, workers, accelerators
+    parts = (("detector_int8_speedup_5_5m_2_threads", int8), ("detector_workers_speedup_5_5m_2_cores", workers),
+             ("detector_accelerator_speedup_5_5m_2_threads", accelerators))
+    result["null_reasons"] = {key: part["reason"] for key, part in parts if not part["available"]}
     return {"detector_ms_per_frame_3_3m_2_threads": lookup(result, 3.3, 2),
             "detector_int8_speedup_5_5m_2_threads": int8.get("speedup"),
-            "detector_workers_speedup_5_5m_2_cores": workers.get("speedup")}, result
+            "detector_workers_speedup_5_5m_2_cores": workers.get("speedup"),
+            "detector_accelerator_speedup_5_5m_2_threads": accelerators.get("speedup")}, result
 
 
 def run_live(s: Settings) -> tuple[Headline, dict]:

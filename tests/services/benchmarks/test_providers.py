@@ -10,7 +10,7 @@ import pytest
 from bevflow.detections import Boxes
 
 from bevflow_services.benchmarks import providers as providers_bench
-from bevflow_services.benchmarks.providers import CASES, bench_providers, loaded_providers
+from bevflow_services.benchmarks.providers import CASES, bench_accelerators, bench_providers, loaded_providers
 
 
 class StandIn:
@@ -70,3 +70,36 @@ def test_a_rim_tile_detector_reports_its_tiles_providers() -> None:
 
     assert loaded_providers(Tiles()) == ["OpenVINOExecutionProvider", "CPUExecutionProvider"]  # type: ignore[arg-type]
     assert loaded_providers(StandIn(["CPUExecutionProvider"])) == ["CPUExecutionProvider"]  # type: ignore[arg-type]
+
+
+CPU, CUDA, OV = "CPUExecutionProvider", "CUDAExecutionProvider", "OpenVINOExecutionProvider"
+
+
+def _loading(works: set[str]):  # noqa: ANN202
+    """A maker whose sessions load the accelerators in ``works`` and fall back to the CPU otherwise."""
+    def make(case: str, names: Sequence[str], threads: int) -> StandIn:
+        full = {"cuda": CUDA, "openvino": OV, "tensorrt": "TensorrtExecutionProvider"}
+        return StandIn([full[names[0]], CPU] if names[0] in works else [CPU])
+    return make
+
+
+@pytest.mark.parametrize(
+    ("available", "works", "reason"),
+    [
+        ([CPU], set(), "offers no accelerator"),
+        (["AzureExecutionProvider", CPU], set(), "offers no accelerator"),
+        ([CUDA, CPU], set(), "cuda offered by this onnxruntime build but not loaded"),
+    ],
+)
+def test_no_accelerator_timed_says_why(available: list[str], works: set[str], reason: str) -> None:
+    result = bench_accelerators(available, rounds=1, calls=1, make=_loading(works))  # type: ignore[arg-type]
+    assert not result["available"] and reason in result["reason"] and "speedup" not in result
+
+
+@pytest.mark.parametrize(("available", "works", "timed"), [([CUDA, CPU], {"cuda"}, ["cpu", "cuda,cpu"]),
+                                                           ([OV, CUDA, CPU], {"openvino"}, ["cpu", "cuda,cpu", "openvino,cpu"])])
+def test_an_accelerator_that_loaded_gets_a_speedup(available: list[str], works: set[str], timed: list[str]) -> None:
+    result = bench_accelerators(available, rounds=1, calls=2, make=_loading(works))  # type: ignore[arg-type]
+    assert result["available"] and result["best"] == f"{next(iter(works))},cpu"
+    assert [list(r["ms_p50"]) for r in result["rows"]] == [timed] * len(CASES)
+    assert result["speedup"] is None or result["speedup"] > 0
