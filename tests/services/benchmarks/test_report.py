@@ -11,6 +11,11 @@ def test_target_verdict(value: object, verdict: str) -> None:
     assert Target(0.05, "").verdict(value) == verdict
 
 
+@pytest.mark.parametrize(("value", "verdict"), [(6, "met"), (8, "met"), (5, "missed"), (None, "-")])
+def test_an_at_least_target_is_met_from_its_limit_up(value: object, verdict: str) -> None:
+    assert Target(6.0, "", at_least=True).verdict(value) == verdict
+
+
 def test_a_caveat_qualifies_the_verdict() -> None:
     assert Target(150.0, "", "(without the detector)").verdict(45.0) == "met (without the detector)"
 
