@@ -12,6 +12,8 @@ from bevflow.detections import Boxes
 from bevflow_services.benchmarks import providers as providers_bench
 from bevflow_services.benchmarks.providers import CASES, bench_accelerators, bench_providers, loaded_providers
 
+CPU, CUDA, OV = "CPUExecutionProvider", "CUDAExecutionProvider", "OpenVINOExecutionProvider"
+
 
 class StandIn:
     """A detector whose session ran on ``providers``; counts its calls."""
@@ -37,7 +39,7 @@ def small_frames(monkeypatch: pytest.MonkeyPatch) -> None:
         ([["openvino", "cpu"]], ["cpu", "openvino,cpu"]),
         ([["CUDA", " cpu"], ["tensorrt", "cuda"]], ["cpu", "cuda,cpu", "tensorrt,cuda"]),
         ([["cpu"]], ["cpu"]),  # the baseline is timed once
-        ([["openvino"], ["OpenVINO"]], ["cpu", "openvino"]),  # and every list
+        ([["openvino"], ["OpenVINO"]], ["cpu", "openvino"]),  # a list given twice is timed once
         ([], ["cpu"]),
     ],
 )
@@ -46,7 +48,7 @@ def test_every_case_is_timed_on_every_list_the_cpu_first(candidates: list[list[s
 
     def make(case: str, names: Sequence[str], threads: int) -> StandIn:
         # an accelerator that "did not load" runs on the CPU, as ONNX Runtime falls back
-        made.append(StandIn(["CPUExecutionProvider"] if "cuda" in names else [f"{names[0]} session"]))
+        made.append(StandIn([CPU] if "cuda" in names else [f"{names[0]} session"]))
         return made[-1]
 
     rows = bench_providers(candidates, threads=2, rounds=2, calls=3, make=make)  # type: ignore[arg-type]
@@ -56,7 +58,7 @@ def test_every_case_is_timed_on_every_list_the_cpu_first(candidates: list[list[s
         assert list(row["loaded"]) == lists
     assert all(d.calls == 1 + 2 * 3 for d in made)  # a warm-up, then every round's calls
     if "cuda,cpu" in lists:
-        assert rows[0]["loaded"]["cuda,cpu"] == ["CPUExecutionProvider"]
+        assert rows[0]["loaded"]["cuda,cpu"] == [CPU]
 
 
 def test_an_unknown_provider_is_refused_before_anything_loads() -> None:
@@ -70,9 +72,6 @@ def test_a_rim_tile_detector_reports_its_tiles_providers() -> None:
 
     assert loaded_providers(Tiles()) == ["OpenVINOExecutionProvider", "CPUExecutionProvider"]  # type: ignore[arg-type]
     assert loaded_providers(StandIn(["CPUExecutionProvider"])) == ["CPUExecutionProvider"]  # type: ignore[arg-type]
-
-
-CPU, CUDA, OV = "CPUExecutionProvider", "CUDAExecutionProvider", "OpenVINOExecutionProvider"
 
 
 def _loading(works: set[str]):  # noqa: ANN202
@@ -98,8 +97,11 @@ def test_no_accelerator_timed_says_why(available: list[str], works: set[str], re
 
 @pytest.mark.parametrize(("available", "works", "timed"), [([CUDA, CPU], {"cuda"}, ["cpu", "cuda,cpu"]),
                                                            ([OV, CUDA, CPU], {"openvino"}, ["cpu", "cuda,cpu", "openvino,cpu"])])
-def test_an_accelerator_that_loaded_gets_a_speedup(available: list[str], works: set[str], timed: list[str]) -> None:
+def test_an_accelerator_that_loaded_gets_a_speedup(monkeypatch: pytest.MonkeyPatch, available: list[str], works: set[str],
+                                                   timed: list[str]) -> None:
+    # every list that is not the CPU alone takes 8 ms where the CPU takes 20
+    monkeypatch.setattr(providers_bench, "alternately", lambda detectors, *a: {k: 20.0 if k == "cpu" else 8.0 for k in detectors})
     result = bench_accelerators(available, rounds=1, calls=2, make=_loading(works))  # type: ignore[arg-type]
     assert result["available"] and result["best"] == f"{next(iter(works))},cpu"
     assert [list(r["ms_p50"]) for r in result["rows"]] == [timed] * len(CASES)
-    assert result["speedup"] is None or result["speedup"] > 0
+    assert result["speedup"] == 2.5  # only from a list whose accelerator loaded
