@@ -29,7 +29,7 @@ if TYPE_CHECKING:
 # (case, camera height m): the models the detector serves by default, and the INT8 copy.
 CASES = (("general model, float32", 5.5), ("general model, INT8", 5.5), ("rim tiles", 3.3))
 BASELINE = ("cpu",)
-ACCELERATORS = ("tensorrt", "cuda", "openvino")
+ACCELERATORS = tuple(name for name in PROVIDERS if name not in BASELINE)
 
 MakeDetector = Callable[[str, Sequence[str], int], "Detector | RimTileDetector"]
 
@@ -77,7 +77,7 @@ def bench_accelerators(available: Sequence[str], rounds: int = 10, calls: int = 
                 "the gpu and openvino extras do, docs/INSTALL.md)"}
     rows = bench_providers([[name, "cpu"] for name in offered], rounds=rounds, calls=calls, make=make)
     general = rows[0]  # CASES[0]: the float32 general model
-    loaded = [key for key, providers in general["loaded"].items() if key != "cpu" and PROVIDERS[key.split(",")[0]] in providers]
+    loaded = [f"{name},cpu" for name in offered if PROVIDERS[name] in general["loaded"][f"{name},cpu"]]
     if not loaded:
         return {"available": False, "rows": rows,
                 "reason": f"{', '.join(offered)} offered by this onnxruntime build but not loaded (no device or driver?)"}
