@@ -4,7 +4,9 @@ pipeline (``bevflow.evaluation.replay``) and scored against world truth.
 Prints and writes (``--json OUT``) ``MODA``, ``MOTA``, ``IDF1``, ``HOTA``, ``DetA``, ``AssA``,
 ``IDSW``, ``precision``, ``recall``, ``APE``, ``frames`` of the online tracks as top-level keys,
 then ``detection_MODA`` (each frame's fused cylinders before tracking) and every score of the
-online, settled and fused output under ``tracked``, ``settled`` and ``detection``.
+online, settled and fused output under ``tracked``, ``settled`` and ``detection``. With
+``--perturb N``, also each headline score's mean, min and max over N perturbed copies of the
+recording (``bevflow.evaluation.perturbed``) under ``perturbed``.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from pathlib import Path
 
 from bevflow.datasets.mot import MIN_CONFIDENCE, RecordingError, read_detections, read_truth
 from bevflow.datasets.wildtrack import FloorArea
+from bevflow.evaluation.perturbed import SCORED, BoxPerturbation, PerturbedReplays, perturbed_replays
 from bevflow.evaluation.replay import Everywhere, ReplayEvaluation, replay_tracking
 from bevflow.site import Site, SiteError, load_site_or_builtin
 from bevflow.tracking.tracker import TrackTable
@@ -40,11 +43,19 @@ def add_replay_arguments(parser: argparse.ArgumentParser) -> None:
                        help=f"use boxes of confidence C or more (default {MIN_CONFIDENCE:g}, the usual operating point of "
                        "a COCO person detector such as Faster R-CNN)")
     group.add_argument("--tracks-out", type=Path, metavar="FILE", help="write the online tracks as frame,id,x,y lines")
+    perturbation = BoxPerturbation()
+    group.add_argument("--perturb", type=int, default=0, metavar="N",
+                       help="also replay N perturbed copies of the recording (seeds 0..N-1) and print each score's mean, min "
+                       "and max: how far a figure would move on another recording of the same scene (default 0: none)")
+    group.add_argument("--perturb-drop", type=float, default=perturbation.drop, metavar="P",
+                       help=f"in each copy, drop each box with probability P (default {perturbation.drop:g})")
+    group.add_argument("--perturb-jitter", type=float, default=perturbation.jitter_px, metavar="PX",
+                       help=f"in each copy, move each box edge by a normal error of PX pixels (default {perturbation.jitter_px:g})")
 
 
-def run_replay(args: argparse.Namespace) -> ReplayEvaluation:
-    """Check the options, replay, print the scores and write ``--tracks-out``; the caller writes
-    ``--json``."""
+def run_replay(args: argparse.Namespace) -> tuple[ReplayEvaluation, PerturbedReplays | None]:
+    """Check the options, replay (and the ``--perturb`` copies), print the scores and write
+    ``--tracks-out``; the caller writes ``--json``."""
     for option in ("site", "truth", "fps"):
         if getattr(args, option) is None:
             raise UserError(f"--detections needs --{option} (see bevflow evaluate --help)")
@@ -52,6 +63,7 @@ def run_replay(args: argparse.Namespace) -> ReplayEvaluation:
         raise UserError(f"--fps must be a number of frames per second > 0, got {args.fps}")
     if not (math.isfinite(args.min_confidence) and args.min_confidence >= 0):
         raise UserError(f"--min-confidence must be a number >= 0, got {args.min_confidence}")
+    perturbation = _perturbation(args)
     try:
         site = load_site_or_builtin(args.site)
     except SiteError as exc:
@@ -68,7 +80,20 @@ def run_replay(args: argparse.Namespace) -> ReplayEvaluation:
     print(format_replay(result, site))
     if args.tracks_out is not None:
         write_tracks(args.tracks_out, result.tracks)
-    return result
+    if not args.perturb:
+        return result, None
+    spread = perturbed_replays(site, recording, truth, args.fps, args.perturb, perturbation, area, args.min_confidence)
+    print(format_spread(spread))
+    return result, spread
+
+
+def _perturbation(args: argparse.Namespace) -> BoxPerturbation:
+    if args.perturb < 0:
+        raise UserError(f"--perturb must be a number of copies >= 0, got {args.perturb}")
+    try:
+        return BoxPerturbation(drop=args.perturb_drop, jitter_px=args.perturb_jitter)
+    except ValueError as exc:
+        raise UserError(f"--perturb-drop, --perturb-jitter: {exc}") from None
 
 
 def parse_area(text: str | None, site: Site) -> FloorArea | Everywhere:
@@ -110,6 +135,20 @@ def format_replay(r: ReplayEvaluation, site: Site) -> str:
     rows.append(f"{'fused':<9} {_num(d.MODA)} {'':>41} {_num(d.precision)} {_num(d.recall)} {_num(d.APE)} {d.frames:>6}")
     rows.append("online: the tracks as the live tracker publishes them; settled: one update late; "
                 "fused: each frame's fused detections before tracking")
+    return "\n".join(rows)
+
+
+_SHORT = {"precision": "prec", "APE": "APE m"}  # the column heads of format_replay
+
+
+def format_spread(p: PerturbedReplays) -> str:
+    """Each headline score's mean, min and max over the perturbed copies, one row each."""
+    rows = [f"{p.runs} perturbed copies (each box dropped with probability {p.perturbation.drop:g}, each edge moved "
+            f"{p.perturbation.jitter_px:g} px σ), online tracks:",
+            f"{'':<9}" + "".join(f" {_SHORT.get(k, k):>6}" for k in SCORED)]
+    for name, field in (("mean", "mean"), ("min", "low"), ("max", "high")):
+        values = [getattr(p.scores[k], field) for k in SCORED]
+        rows.append(f"{name:<9}" + "".join(f" {v:>6.1f}" if k == "IDSW" else f" {_num(v)}" for k, v in zip(SCORED, values, strict=True)))
     return "\n".join(rows)
 
 

@@ -36,6 +36,23 @@ def test_replay_prints_and_writes_the_scores_and_the_tracks(recording: Path, cap
     assert "HOTA" in printed and "settled" in printed and "confidence >= 0.5" in printed
 
 
+def test_perturbed_copies_print_and_write_the_spread_of_each_score(recording: Path, capsys: pytest.CaptureFixture) -> None:
+    out = recording / "scores.json"
+    assert main(args(recording, "--perturb", "2", "--perturb-drop", "0.6", "--perturb-jitter", "1", "--json", str(out))) == 0
+    result = json.loads(out.read_text())
+    spread = result["perturbed"]
+    assert (spread["runs"], spread["drop"], spread["jitter_px"]) == (2, 0.6, 1.0)
+    assert set(HEADLINE) - {"frames"} <= spread.keys()
+    recall = spread["recall"]
+    assert recall["min"] <= recall["mean"] <= recall["max"] < result["recall"]  # most boxes gone
+    printed = capsys.readouterr().out
+    assert "2 perturbed copies (each box dropped with probability 0.6, each edge moved 1 px" in printed
+    assert all(line in printed for line in ("\nmean ", "\nmin ", "\nmax "))
+    # none asked for: no copies replayed, no key written
+    assert main(args(recording, "--json", str(out))) == 0
+    assert "perturbed" not in json.loads(out.read_text()) and "perturbed copies" not in capsys.readouterr().out
+
+
 def test_the_area_leaves_out_unmatched_tracks_beyond_it(recording: Path, tmp_path: Path) -> None:
     # the walkers stand at y = -2, 0, 2 m: an area around the first one scores only them
     out = tmp_path / "area.json"
@@ -51,6 +68,9 @@ def test_the_area_leaves_out_unmatched_tracks_beyond_it(recording: Path, tmp_pat
         (None, ("--area", "1,2,3"), "--area must be four numbers"),
         (None, ("--area", "3,0,1,2"), "--area needs XMAX > XMIN"),
         (None, ("--min-confidence", "-1"), "--min-confidence must be a number >= 0"),
+        (None, ("--perturb", "-1"), "--perturb must be a number of copies >= 0"),
+        (None, ("--perturb", "2", "--perturb-drop", "1"), "--perturb-drop, --perturb-jitter: drop must be a probability in [0, 1)"),
+        (None, ("--perturb", "2", "--perturb-jitter", "nan"), "--perturb-drop, --perturb-jitter: jitter_px must be a number of pixels >= 0"),
         ("missing camera", (), "CVLab2.txt: no detections file for camera 'CVLab2'"),
         ("bad row", (), "CVLab1.txt:3: 'wide' is not a number"),
         ("bad truth", (), "truth.txt:1: expected at least 4"),
