@@ -216,6 +216,20 @@ class Page:
         )
         self.click_at(box["x"], box["y"])
 
+    def click_until(self, selector: str, expression: str, what: str, timeout_s: float = 10.0) -> None:
+        """Click ``selector`` until ``expression`` holds, as a user clicks again when a click did
+        nothing: a live page redrawn between the press and the release (a rebuilt row, a shifted
+        layout) takes no click. CdpError after ``timeout_s``."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            self.click(selector)
+            try:
+                self.wait_for(expression, timeout_s=min(1.0, max(deadline - time.monotonic(), 0.05)), what=what)
+                return
+            except CdpError:
+                if time.monotonic() > deadline:
+                    raise CdpError(f"clicked {selector} for {timeout_s} s without {what}") from None
+
     def press(self, key: str, code: str | None = None, text: str | None = None) -> None:
         """Press and release one key on whatever has the focus (``press("Enter", text="\\r")``)."""
         base = {"key": key, "code": code or key}
