@@ -314,6 +314,7 @@ def test_empty_table() -> None:
         pytest.param({"shape_smoothing": 1.5}, "shape_smoothing", id="smoothing"),
         pytest.param({"report_max_misses": -1}, "report_max_misses", id="report"),
         pytest.param({"sighting_gate_chi2": 0.0}, "sighting_gate_chi2", id="sighting"),
+        pytest.param({"lost_speed_mps": 0.0}, "lost_speed_mps", id="lost speed"),
     ],
 )
 def test_config_rejects_bad_values(overrides: dict, message: str) -> None:
@@ -399,3 +400,33 @@ def test_predicted_positions_are_where_the_tracks_will_be_without_moving_them() 
     assert 1.1 < confirmed.xy[0, 0] < 1.3
     assert confirmed.covariance is not None and (np.linalg.eigvalsh(confirmed.covariance) > 0).all()
     np.testing.assert_array_equal(tracker.tracks(include_tentative=True).xy, before)
+
+
+# --- past the uncertainty gate: what nobody else took ----------------------------------------
+PRECISE = 0.02  # m, σ of a very good detector's feet
+
+
+def _precise(xy: list[list[float]]) -> Cylinders:
+    return Cylinders(xy=xy, covariance=np.broadcast_to(PRECISE**2 * np.eye(2), (len(xy), 2, 2)).copy())
+
+
+@pytest.mark.parametrize(("lost_speed_mps", "ids"), [(2.0, {1}), (None, {1, 2})], ids=["2 m/s", "off"])
+def test_a_precisely_seen_person_who_turns_keeps_their_track(lost_speed_mps, ids) -> None:
+    """Walking along +x at 1.2 m/s, 4 updates a second, then turning onto +y: the first step after
+    the turn lands 0.42 m from the prediction, far outside the uncertainty gate of a track fed
+    0.02 m positions. Nobody else is there, so the track takes it within 2 m/s × 0.25 s."""
+    tracker = Tracker(TrackerConfig(activate_hits=1, lost_speed_mps=lost_speed_mps))
+    path = [[0.3 * k, 0.0] for k in range(12)] + [[3.3, 0.3 * k] for k in range(1, 8)]
+    seen = {int(i) for k, xy in enumerate(path) for i in tracker.update(_precise([xy]), k * 0.25).id}
+    assert seen == ids
+
+
+def test_past_the_uncertainty_gate_a_track_takes_no_detection_another_track_took() -> None:
+    """A at x = 0 and B at x = 0.4, both still; A is missed. B's detection is 0.4 m from A's
+    track, within 2 m/s × 0.25 s, but B's own track takes it first and A's track coasts."""
+    tracker = Tracker(TrackerConfig(activate_hits=1))
+    for k in range(10):
+        tracker.update(_precise([[0.0, 0.0], [0.4, 0.0]]), k * 0.25)
+    last = tracker.update(_precise([[0.4, 0.0]]), 2.5)
+    assert last.id[last.detection == 0].tolist() == [2]
+    assert last.misses[last.id == 1].tolist() == [1]
