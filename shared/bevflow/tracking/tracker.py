@@ -296,7 +296,7 @@ class Tracker:
         strong = usable & (cylinders.score >= cfg.weak_score)
         weak = usable & ~strong
         taken = np.zeros(len(cylinders), dtype=bool)
-        # Every (track, detection) pair within the wider gate, found once for all three passes.
+        # Every (track, detection) pair within the wider gate, found once for every pass.
         det_xy = np.where(usable[:, None], cylinders.xy, np.nan)
         near = gated_pairs(tracks.state[:, :2], det_xy, max(cfg.gate_m, cfg.weak_gate_m))
         pairs = near if cfg.gate_chi2 is None else self._within_innovation(near, cylinders, cfg.gate_chi2)
