@@ -20,6 +20,10 @@ log = logging.getLogger(__name__)
 # last frames still on their way. Cameras send 2-10 frames a second, so a few lost or late ones
 # do not reach it.
 CAMERA_SILENCE_S = 4.0
+# A camera not heard from since the tracker started is reported down only after this long: when a
+# whole site starts, the detectors load their models before the first results (about 10 s in
+# ``./run demo`` on 2 cores), and each camera counted as down for that would be one false alert.
+CAMERA_FIRST_REPORT_S = 30.0
 
 
 class UserError(Exception):

@@ -108,7 +108,8 @@ def test_a_stream_lost_and_found_is_reported_in_camera_health(tmp_path: Path) ->
     group = ServiceGroup(site=str(site_file(tmp_path, stream_port)), log_dir=tmp_path / "logs")
     detector = None
     try:
-        group.start("tracker", "--camera-up-after", "1")
+        # b never streams: reported down once it has had --camera-first-report to send a first result.
+        group.start("tracker", "--camera-up-after", "1", "--camera-first-report", "5")
         group.start("gateway", "--port", str(http_port), "--auth", "off", "--no-view3d")
         base = f"http://127.0.0.1:{http_port}"
         group.wait_http(f"{base}/api/health")

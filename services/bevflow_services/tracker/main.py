@@ -8,7 +8,8 @@ Camera results arrive on Zenoh threads, unsynchronised and sometimes late. They 
 ready ticks in time order and hands each to a ``TickHandler`` (``ticks.py``): the ``SiteTracker``
 steps with it, and a ``DriftMonitor`` compares overlapping cameras' estimates of the same people
 to raise a ``calibration_drift`` alert when a camera seems to have moved (``--no-drift`` turns that
-off). A camera silent for ``--camera-timeout`` seconds raises a ``camera_down`` alert, ended once
+off). A camera silent for ``--camera-timeout`` seconds (``--camera-first-report`` before its first
+result since the tracker started) raises a ``camera_down`` alert, ended once
 it has reported again for ``--camera-up-after`` seconds without falling silent (a camera that keeps
 dropping out, on an overloaded machine, is one alert, not one per dropout). Every few seconds it
 publishes the ids of the alerts it still has open (``OpenAlerts``), which renews their lease: an
@@ -32,7 +33,7 @@ from bevflow.schemas import CameraCylinders, CameraHealthEvent, Event, Occupancy
 from bevflow.units import NS_PER_S
 
 from bevflow_services import bus
-from bevflow_services.runtime import CAMERA_SILENCE_S, UserError, service_site, stop_on_signals
+from bevflow_services.runtime import CAMERA_FIRST_REPORT_S, CAMERA_SILENCE_S, UserError, service_site, stop_on_signals
 from bevflow_services.service_metrics import MetricsBook, reporting
 from bevflow_services.tracker.ticks import TickHandler
 from bevflow_services.tracker.track_ids import TrackIdError, TrackIdReservation
@@ -49,6 +50,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        help="how long a tick waits for a late camera before it goes without it (default 150)")
     group.add_argument("--camera-timeout", type=float, default=CAMERA_SILENCE_S,
                        help=f"seconds of silence after which a camera is reported down (default {CAMERA_SILENCE_S:g})")
+    group.add_argument("--camera-first-report", type=float, default=CAMERA_FIRST_REPORT_S,
+                       help="seconds a camera may take to send its first result after the tracker starts before it is "
+                       f"reported down (default {CAMERA_FIRST_REPORT_S:g}; never less than --camera-timeout)")
     group.add_argument("--camera-up-after", type=float, default=10.0,
                        help="seconds a camera reported down must report steadily before it counts as up again (default 10)")
     group.add_argument("--event-cache", type=int, default=10000,
@@ -82,12 +86,17 @@ def drift_config(args: argparse.Namespace) -> DriftConfig | None:
 
 class CameraWatch:
     """Per camera, when it last reported; ``check`` turns silences into down/up alerts. A camera
-    that is down counts as up again once it has reported for ``up_after_ns`` without a silence."""
+    that is down counts as up again once it has reported for ``up_after_ns`` without a silence. A
+    camera that has not reported since ``now_ns`` (the start) is down only after ``first_report_ns``
+    (at least ``timeout_ns``)."""
 
-    def __init__(self, cameras: list[str], timeout_ns: int, now_ns: int, up_after_ns: int = 0) -> None:
+    def __init__(self, cameras: list[str], timeout_ns: int, now_ns: int, up_after_ns: int = 0,
+                 first_report_ns: int = 0) -> None:  # fmt: skip
         self.timeout_ns = timeout_ns
         self.up_after_ns = up_after_ns
+        self.first_report_ns = max(timeout_ns, first_report_ns)
         self.last_ns = dict.fromkeys(cameras, now_ns)
+        self.waiting = set(cameras)  # not heard from since the start
         self.down: dict[str, CameraHealthEvent] = {}
         self.back_ns: dict[str, int] = {}  # down cameras reporting again: since when, without a silence
 
@@ -95,17 +104,22 @@ class CameraWatch:
         if camera in self.down and now_ns - self.last_ns[camera] > self.timeout_ns:
             self.back_ns[camera] = now_ns  # back after a silence: the steady stretch starts now
         self.last_ns[camera] = now_ns
+        self.waiting.discard(camera)
 
     def check(self, now_ns: int) -> list[CameraHealthEvent]:
         events = []
         for camera, last in self.last_ns.items():
-            silent = now_ns - last > self.timeout_ns
+            first = camera in self.waiting
+            limit = self.first_report_ns if first else self.timeout_ns
+            silent = now_ns - last > limit
             if silent and camera not in self.down:
                 # raised_ns, as every alert has: when it was found, which orders it among the
                 # alerts (a client resuming the alert websocket relies on it).
+                reason = f"no results since the tracker started {limit / 1e9:.0f} s ago" if first else \
+                    f"no results for {limit / 1e9:.0f} s"
                 self.down[camera] = CameraHealthEvent(
                     id=f"camera-{camera}-{last}", type="camera_down", camera=camera, start_ns=last,
-                    raised_ns=now_ns, reason=f"no results for {self.timeout_ns / 1e9:.0f} s")
+                    raised_ns=now_ns, reason=reason)
                 events.append(self.down[camera])
             elif not silent and camera in self.down and now_ns - self.back_ns.get(camera, last) >= self.up_after_ns:
                 back = self.back_ns.pop(camera, last)
@@ -157,7 +171,8 @@ def main(args: argparse.Namespace) -> int:
     handler = TickHandler(site, tracker, drift_config(args))
     assembler: TickAssembler[CameraCylinders] = TickAssembler(
         site.camera_ids, period_ns=int(args.tick_ms * 1e6), max_wait_ns=int(args.max_wait_ms * 1e6))
-    watch = CameraWatch(site.camera_ids, int(args.camera_timeout * 1e9), time.time_ns(), int(args.camera_up_after * 1e9))
+    watch = CameraWatch(site.camera_ids, int(args.camera_timeout * 1e9), time.time_ns(), int(args.camera_up_after * 1e9),
+                        int(args.camera_first_report * 1e9))
     lock = threading.Lock()
     book = MetricsBook()
     for camera in site.camera_ids:  # every camera's series from the start, at 0

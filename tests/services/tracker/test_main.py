@@ -1,5 +1,7 @@
 from __future__ import annotations
 
+import pytest
+
 from bevflow.schemas import CameraHealthEvent, OverCapacity
 
 from bevflow_services.tracker.main import CameraWatch, OpenAlertBook
@@ -31,6 +33,26 @@ def test_a_camera_that_keeps_dropping_out_is_one_alert_until_it_reports_steadily
     assert (ended.id, ended.end_ns) == (down.id, 16 * S)  # one outage, ended when the steady stretch began
     assert up.type == "camera_up" and up.start_ns == 16 * S
     assert watch.check(35 * S) == []
+
+
+@pytest.mark.parametrize(
+    ("first_report_s", "down_at_s", "reason"),
+    [
+        pytest.param(30, 31, "no results since the tracker started 30 s ago", id="a grace for the first result"),
+        pytest.param(0, 6, "no results since the tracker started 5 s ago", id="no grace: the silence timeout"),
+        pytest.param(2, 6, "no results since the tracker started 5 s ago", id="never shorter than the timeout"),
+    ],
+)
+def test_a_camera_that_never_reported_is_down_after_its_first_report_grace(first_report_s, down_at_s, reason) -> None:
+    """At a site's start the detectors load their models before the first results: a camera not
+    heard from since the tracker started is down only after ``first_report_ns``; one that has
+    reported and falls silent still goes down after the timeout."""
+    watch = CameraWatch(["late", "lost"], timeout_ns=5 * S, now_ns=0, first_report_ns=first_report_s * S)
+    watch.seen("lost", 1 * S)
+    events = [e for t in range(1, 40) for e in watch.check(t * S)]
+    by_camera = {e.camera: e for e in events if e.type == "camera_down"}
+    assert (by_camera["late"].raised_ns, by_camera["late"].reason) == (down_at_s * S, reason)
+    assert (by_camera["lost"].raised_ns, by_camera["lost"].reason) == (7 * S, "no results for 5 s")
 
 
 def test_the_tracker_renews_the_alerts_it_has_open_every_few_seconds() -> None:
