@@ -13,10 +13,15 @@ import argparse
 import json
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from bevflow.detect.tiles import RIM_TILES, RimTileDetector, load_rim_tiles
 
 from bevflow_services.runtime import UserError
+
+if TYPE_CHECKING:
+    from bevflow.evaluation.detector import DetectorScores, ImageDetector
+    from bevflow.evaluation.turned import TurnedScores
 
 
 def add_detector_arguments(parser: argparse.ArgumentParser) -> None:
@@ -38,6 +43,10 @@ def add_detector_arguments(parser: argparse.ArgumentParser) -> None:
                        help="resize factor for images without calibration (default: found from the image circle "
                        "for a 190-degree lens 3 m above the floor, printed)")  # fmt: skip
     group.add_argument("--draw", type=Path, metavar="DIR", help="write each frame with the truth (green) and the detections (yellow: right, red: wrong) drawn")
+    group.add_argument("--turns", type=int, default=1, metavar="N",
+                       help="also score the frames as a camera turned about its axis would see them, at N turns k x 360/N "
+                       "degrees (k = 0 .. N-1), and print each score's mean, min and max: how much the figures owe to the "
+                       "directions people happen to lie in; needs rotated truth boxes (default 1: the frames as they are)")  # fmt: skip
 
 
 def _check(args: argparse.Namespace) -> None:
@@ -55,6 +64,8 @@ def _check(args: argparse.Namespace) -> None:
         raise UserError(f"--threads must be positive, got {args.threads}")
     if args.tile_model is not None and str(args.model) != RIM_TILES:
         raise UserError("--tile-model goes with --model rim-tiles")
+    if args.turns < 1:
+        raise UserError(f"--turns must be a number of turns >= 1, got {args.turns}")
     if str(args.model) == RIM_TILES and args.scale is not None:
         raise UserError("--model rim-tiles sizes its tiles from the focal length: give --camera-height and --focal, or neither, not --scale")
 
@@ -83,6 +94,7 @@ def run_detector_evaluation(args: argparse.Namespace) -> int:
                                     log=print)  # fmt: skip
         scores = score_frames(results, ms)
         drawn = write_drawings(results, args.draw, scores.threshold) if args.draw is not None else []
+        spread = _turned(detector, args, scores) if args.turns > 1 else None
     except (DetectorError, CocoError, FileNotFoundError) as exc:
         raise UserError(str(exc)) from None
     except OSError as exc:
@@ -93,11 +105,30 @@ def run_detector_evaluation(args: argparse.Namespace) -> int:
           f"recall {scores.recall:.3f}  F1 {scores.F1:.3f}  (score >= {scores.threshold:.3f})")  # fmt: skip
     if drawn:
         print(f"drew {len(drawn)} frames into {args.draw}")
+    if spread is not None:
+        print(f"{len(spread.degrees)} turns ({', '.join(f'{d:g}' for d in spread.degrees)} degrees): "
+              + "  ".join(f"{k} {s.mean:.3f} ({s.low:.3f}-{s.high:.3f})" for k, s in spread.scores.items()))  # fmt: skip
     if isinstance(detector, DetectorBank):
         print(f"models by camera height: {detector.describe()}")
     if args.json is not None:
         try:
-            args.json.write_text(json.dumps(scores.as_dict(), indent=2) + "\n")
+            args.json.write_text(json.dumps(scores.as_dict() | ({} if spread is None else {"turned": spread.as_dict()}), indent=2) + "\n")
         except OSError as exc:
             raise UserError(f"cannot write {args.json}: {exc.strerror or exc}") from None
     return 0
+
+
+def _turned(detector: ImageDetector, args: argparse.Namespace, as_they_are: DetectorScores) -> TurnedScores:
+    """The scores at ``--turns`` turns, the first being the frames as they are (already scored)."""
+    from bevflow.evaluation.detector import detect_frames, score_frames
+    from bevflow.evaluation.turned import TurnedScores, turn_angles
+
+    degrees = turn_angles(args.turns)
+    per_turn = [as_they_are.as_dict()]
+    for turn in degrees[1:]:
+        try:
+            results, ms = detect_frames(detector, args.annotations, args.images, args.camera_height, args.focal, args.scale, turn_deg=turn)
+        except ValueError as exc:
+            raise UserError(f"--turns: {exc}") from None
+        per_turn.append(score_frames(results, ms).as_dict())
+    return TurnedScores.of(degrees, per_turn)

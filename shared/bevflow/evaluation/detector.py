@@ -34,6 +34,7 @@ from bevflow.detect.circle import AssumedCalibration, assume_calibration
 from bevflow.detect.coco import CocoImage, read_coco, rotated_to_xyxy
 from bevflow.detect.rotated import radial_boxes, rotated_iou_matrix
 from bevflow.detections import Boxes
+from bevflow.evaluation.turned import turned
 
 FloatArray = NDArray[np.float64]
 
@@ -252,10 +253,13 @@ def detect_frames(
     scale: float | None = None,
     progress: Callable[[int, int], None] | None = None,
     log: Callable[[str], None] | None = None,
+    turn_deg: float = 0.0,
 ) -> tuple[list[FrameResult], float]:
     """Run ``detector`` on every image of a COCO file (set up by ``frame_setup``); also returns
     the mean milliseconds of the detector per frame. ``log`` hears what was assumed of frames
-    without calibration. Raises FileNotFoundError / ValueError for unreadable input."""
+    without calibration. ``turn_deg``: each frame and its truth turned by that much about the
+    image circle's centre first (``bevflow.evaluation.turned``). Raises FileNotFoundError /
+    ValueError for unreadable input."""
     results, seconds = [], 0.0
     entries = read_coco(annotations, images_dir)
     for k, entry in enumerate(entries):
@@ -263,6 +267,8 @@ def detect_frames(
         setup = frame_setup(entry, image, camera_height_m, focal_px, scale)
         if setup.assumed is not None and log is not None:
             log(f"{entry.path.name}: no calibration given; assumed {setup.assumed.describe()}")
+        if turn_deg:
+            entry, image = turned(entry, image, setup.centre, turn_deg)
         start = time.perf_counter()
         xyxy, rotated, conf = run_on_frame(detector, image, setup)
         seconds += time.perf_counter() - start

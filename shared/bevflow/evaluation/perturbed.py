@@ -14,6 +14,7 @@ boxes dropped and 2 px of edge noise score 0.41–0.50.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -73,6 +74,14 @@ class Spread:
     low: float
     high: float
 
+    @classmethod
+    def of(cls, values: Sequence[float]) -> Spread:
+        v = np.asarray(values, dtype=np.float64)
+        return cls(float(v.mean()), float(v.min()), float(v.max()))
+
+    def as_dict(self) -> dict[str, float]:
+        return {"mean": self.mean, "min": self.low, "max": self.high}
+
 
 @dataclass(frozen=True)
 class PerturbedReplays:
@@ -84,7 +93,7 @@ class PerturbedReplays:
 
     def as_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"runs": self.runs, "drop": self.perturbation.drop, "jitter_px": self.perturbation.jitter_px}
-        out.update({k: {"mean": s.mean, "min": s.low, "max": s.high} for k, s in self.scores.items()})
+        out.update({k: s.as_dict() for k, s in self.scores.items()})
         return out
 
 
@@ -108,6 +117,5 @@ def perturbed_replays(
         replay_tracking(site, perturbation.apply(recording, sizes, seed), truth, fps, area, min_confidence, tracker)
         for seed in range(runs)
     ]
-    table = np.array([[r.headline()[k] for k in SCORED] for r in results], dtype=np.float64)
-    scores = {k: Spread(float(col.mean()), float(col.min()), float(col.max())) for k, col in zip(SCORED, table.T, strict=True)}
+    scores = {k: Spread.of([r.headline()[k] for r in results]) for k in SCORED}
     return PerturbedReplays(perturbation, runs, scores)

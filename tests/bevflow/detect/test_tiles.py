@@ -1,5 +1,5 @@
-"""The rim-tile detector: tiles turned upright about the image centre, boxes mapped back with their
-tile's angle, cut boxes dropped and duplicates merged. A stand-in tile detector finds upright
+"""The rim-tile detector: tiles turned upright about the image centre, boxes mapped back at their
+radial angle, cut boxes dropped and duplicates merged. A stand-in tile detector finds upright
 bright blobs, as a detector trained on photographs finds upright people."""
 
 from __future__ import annotations
@@ -64,7 +64,9 @@ def test_a_person_lying_along_the_radius_is_found_once_with_its_angle(degrees: f
     rotated, conf = RimTileDetector(tiles).detect_rotated(_frame([person]), 3.0, FOCAL, CENTRE)
     assert tiles.tiles == 8
     assert len(rotated) == 1 and conf.tolist() == [0.9]
-    # Between two tiles' angles the tile's upright box encloses the person turned by up to 22.5°.
+    # Between two tiles' angles the tile's upright box encloses the person turned by up to 22.5°;
+    # the box comes back turned to the person's radial angle, its sides as the tile saw them.
+    assert abs((rotated[0, 4] - degrees + 90) % 180 - 90) < 1.0
     assert rotated_iou_matrix(rotated, np.array([person]))[0, 0] > (0.8 if degrees % 45 == 0 else 0.4)
 
 

@@ -52,6 +52,7 @@ def test_given_calibration_is_used_and_nothing_is_assumed(tmp_path: Path, capsys
     [(["--camera-height", "3"], "give --camera-height and --focal together"),
      (["--scale", "0"], "--scale must be a number > 0, got 0.0"),
      (["--threads", "0"], "--threads must be positive, got 0"),
+     (["--turns", "0"], "--turns must be a number of turns >= 1, got 0"),
      (["--model", "rim-tiles", "--scale", "0.5"], "--model rim-tiles sizes its tiles from the focal length"),
      (["--tile-model", "x.onnx"], "--tile-model goes with --model rim-tiles"),
      (["--model", "nope"], "detector model 'nope' is neither an ONNX file nor a shipped model (shipped: "),
@@ -75,3 +76,22 @@ def test_a_shipped_model_is_named_as_in_a_site_file(tmp_path: Path, capsys: pyte
     images, ann = _frames(tmp_path)
     assert main(["evaluate", "--detector", *model, "--images", str(images), "--annotations", str(ann)]) == 0
     assert "AP50_rotated" in capsys.readouterr().out
+
+
+def test_turns_print_and_write_each_scores_spread(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    images, ann = _frames(tmp_path)
+    assert main(["evaluate", "--detector", "--images", str(images), "--annotations", str(ann), "--turns", "3", "--json", str(tmp_path / "out.json")]) == 0
+    assert "3 turns (0, 120, 240 degrees): AP50 " in capsys.readouterr().out
+    turned = json.loads((tmp_path / "out.json").read_text())["turned"]
+    assert turned["degrees"] == [0.0, 120.0, 240.0]
+    for key in ("AP50", "AP50_rotated", "precision", "recall", "F1"):
+        assert turned[key]["min"] <= turned[key]["mean"] <= turned[key]["max"]
+
+
+def test_turns_need_rotated_truth(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    images, ann = _frames(tmp_path)
+    doc = json.loads(ann.read_text())
+    doc["annotations"][0]["bbox"] = [145, 220, 30, 60]  # [x, y, w, h]: no angle
+    ann.write_text(json.dumps(doc))
+    assert main(["evaluate", "--detector", "--images", str(images), "--annotations", str(ann), "--turns", "2"]) == 2
+    assert "--turns: a.jpg: turning a frame needs rotated truth boxes" in capsys.readouterr().err
