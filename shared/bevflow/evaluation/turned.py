@@ -8,8 +8,8 @@ by some degrees about the image circle's centre would have seen them; scoring th
 several turns (``bevflow evaluate --detector --turns N``) shows the spread a mounting could give.
 
 On the real frames of docs/RESULTS.md, five turns 72° apart (every 9° within a tile's 45°) took the
-rim tiles' AP50 from 0.86 to 0.27 at one turn while boxes kept their tile's angle; turned to
-their radial angle, 0.73 at worst.
+rim tiles' AP50 from 0.85 to 0.31 at the worst turn while boxes kept their tile's angle; turned to
+their radial angle, 0.64 at worst.
 """
 
 from __future__ import annotations
