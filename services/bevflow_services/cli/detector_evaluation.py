@@ -71,7 +71,7 @@ def _check(args: argparse.Namespace) -> None:
 
 
 def run_detector_evaluation(args: argparse.Namespace) -> int:
-    from bevflow.detect.coco import CocoError
+    from bevflow.detect.coco import CocoError, read_coco
     from bevflow.detect.runtime import DEFAULT_RANGES, Detector, DetectorBank, DetectorError
     from bevflow.evaluation.detector import detect_frames, score_frames
     from bevflow.evaluation.drawing import write_drawings
@@ -80,6 +80,8 @@ def run_detector_evaluation(args: argparse.Namespace) -> int:
 
     _check(args)
     try:
+        if args.turns > 1 and not all(e.oriented for e in read_coco(args.annotations, args.images)):
+            raise UserError(f"--turns needs rotated truth boxes ([cx, cy, w, h, degrees]); {args.annotations} has axis-aligned ones")
         # Score every detection: AP needs the whole precision-recall curve.
         detector: Detector | RimTileDetector | DetectorBank
         if str(args.model) == RIM_TILES:

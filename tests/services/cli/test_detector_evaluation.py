@@ -94,4 +94,6 @@ def test_turns_need_rotated_truth(tmp_path: Path, capsys: pytest.CaptureFixture)
     doc["annotations"][0]["bbox"] = [145, 220, 30, 60]  # [x, y, w, h]: no angle
     ann.write_text(json.dumps(doc))
     assert main(["evaluate", "--detector", "--images", str(images), "--annotations", str(ann), "--turns", "2"]) == 2
-    assert "--turns: a.jpg: turning a frame needs rotated truth boxes" in capsys.readouterr().err
+    out, err = capsys.readouterr()
+    assert f"--turns needs rotated truth boxes ([cx, cy, w, h, degrees]); {ann} has axis-aligned ones" in err
+    assert "AP50" not in out  # refused before any frame went through the detector
