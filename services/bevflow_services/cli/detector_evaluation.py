@@ -13,15 +13,10 @@ import argparse
 import json
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 from bevflow.detect.tiles import RIM_TILES, RimTileDetector, load_rim_tiles
 
 from bevflow_services.runtime import UserError
-
-if TYPE_CHECKING:
-    from bevflow.evaluation.detector import DetectorScores, ImageDetector
-    from bevflow.evaluation.turned import TurnedScores
 
 
 def add_detector_arguments(parser: argparse.ArgumentParser) -> None:
@@ -73,8 +68,9 @@ def _check(args: argparse.Namespace) -> None:
 def run_detector_evaluation(args: argparse.Namespace) -> int:
     from bevflow.detect.coco import CocoError, read_coco
     from bevflow.detect.runtime import DEFAULT_RANGES, Detector, DetectorBank, DetectorError
-    from bevflow.evaluation.detector import detect_frames, score_frames
+    from bevflow.evaluation.detector import detect_turned_frames, score_frames
     from bevflow.evaluation.drawing import write_drawings
+    from bevflow.evaluation.turned import TurnedScores, turn_angles
 
     from bevflow_services.detector.models import resolve_model
 
@@ -92,11 +88,14 @@ def run_detector_evaluation(args: argparse.Namespace) -> int:
         else:
             model = resolve_model(args.model) if args.model is not None else None
             detector = Detector(model, threads=args.threads, score_threshold=0.05)
-        results, ms = detect_frames(detector, args.annotations, args.images, args.camera_height, args.focal, args.scale,
-                                    log=print)  # fmt: skip
+        degrees = turn_angles(args.turns)  # the first is none: the frames as they are
+        per_turn = detect_turned_frames(detector, args.annotations, degrees, args.images, args.camera_height, args.focal,
+                                        args.scale, log=print)  # fmt: skip
+        results, ms = per_turn[0]
         scores = score_frames(results, ms)
         drawn = write_drawings(results, args.draw, scores.threshold) if args.draw is not None else []
-        spread = _turned(detector, args, scores) if args.turns > 1 else None
+        turned = [scores.as_dict()] + [score_frames(*turn).as_dict() for turn in per_turn[1:]]
+        spread = TurnedScores.of(degrees, turned) if args.turns > 1 else None
     except (DetectorError, CocoError, FileNotFoundError) as exc:
         raise UserError(str(exc)) from None
     except OSError as exc:
@@ -119,18 +118,3 @@ def run_detector_evaluation(args: argparse.Namespace) -> int:
             raise UserError(f"cannot write {args.json}: {exc.strerror or exc}") from None
     return 0
 
-
-def _turned(detector: ImageDetector, args: argparse.Namespace, as_they_are: DetectorScores) -> TurnedScores:
-    """The scores at ``--turns`` turns, the first being the frames as they are (already scored)."""
-    from bevflow.evaluation.detector import detect_frames, score_frames
-    from bevflow.evaluation.turned import TurnedScores, turn_angles
-
-    degrees = turn_angles(args.turns)
-    per_turn = [as_they_are.as_dict()]
-    for turn in degrees[1:]:
-        try:
-            results, ms = detect_frames(detector, args.annotations, args.images, args.camera_height, args.focal, args.scale, turn_deg=turn)
-        except ValueError as exc:
-            raise UserError(f"--turns: {exc}") from None
-        per_turn.append(score_frames(results, ms).as_dict())
-    return TurnedScores.of(degrees, per_turn)

@@ -253,29 +253,45 @@ def detect_frames(
     scale: float | None = None,
     progress: Callable[[int, int], None] | None = None,
     log: Callable[[str], None] | None = None,
-    turn_deg: float = 0.0,
 ) -> tuple[list[FrameResult], float]:
     """Run ``detector`` on every image of a COCO file (set up by ``frame_setup``); also returns
     the mean milliseconds of the detector per frame. ``log`` hears what was assumed of frames
-    without calibration. ``turn_deg``: each frame and its truth turned by that much about the
-    image circle's centre first (``bevflow.evaluation.turned``). Raises FileNotFoundError /
-    ValueError for unreadable input."""
-    results, seconds = [], 0.0
+    without calibration. Raises FileNotFoundError / ValueError for unreadable input."""
+    [(results, ms)] = detect_turned_frames(detector, annotations, [0.0], images_dir, camera_height_m, focal_px, scale, progress, log)
+    return results, ms
+
+
+def detect_turned_frames(
+    detector: ImageDetector,
+    annotations: Path,
+    degrees: Sequence[float],
+    images_dir: Path | None = None,
+    camera_height_m: float | None = None,
+    focal_px: float | None = None,
+    scale: float | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    log: Callable[[str], None] | None = None,
+) -> list[tuple[list[FrameResult], float]]:
+    """``detect_frames`` once for each of ``degrees``: every frame and its truth turned by that
+    much about the image circle's centre (``bevflow.evaluation.turned``; 0 leaves it as it is).
+    Each frame is read and set up once for all of them."""
     entries = read_coco(annotations, images_dir)
+    results: list[list[FrameResult]] = [[] for _ in degrees]
+    seconds = [0.0] * len(degrees)
     for k, entry in enumerate(entries):
         image = read_image(entry.path)
         setup = frame_setup(entry, image, camera_height_m, focal_px, scale)
         if setup.assumed is not None and log is not None:
             log(f"{entry.path.name}: no calibration given; assumed {setup.assumed.describe()}")
-        if turn_deg:
-            entry, image = turned(entry, image, setup.centre, turn_deg)
-        start = time.perf_counter()
-        xyxy, rotated, conf = run_on_frame(detector, image, setup)
-        seconds += time.perf_counter() - start
-        results.append(FrameResult(entry, setup, xyxy, rotated, conf))
+        for t, turn in enumerate(degrees):
+            seen, frame = turned(entry, image, setup.centre, turn) if turn else (entry, image)
+            start = time.perf_counter()
+            xyxy, rotated, conf = run_on_frame(detector, frame, setup)
+            seconds[t] += time.perf_counter() - start
+            results[t].append(FrameResult(seen, setup, xyxy, rotated, conf))
         if progress is not None:
             progress(k + 1, len(entries))
-    return results, 1000.0 * seconds / max(len(entries), 1)
+    return [(r, 1000.0 * s / max(len(entries), 1)) for r, s in zip(results, seconds, strict=True)]
 
 
 def read_image(path: Path) -> NDArray[np.uint8]:

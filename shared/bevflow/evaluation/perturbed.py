@@ -14,7 +14,6 @@ boxes dropped and 2 px of edge noise score 0.41–0.50.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -24,6 +23,7 @@ from bevflow.datasets.mot import CameraRecording, DetectionRecording, WorldTruth
 from bevflow.detections import Boxes
 from bevflow.evaluation.replay import HEADLINE, Everywhere, ReplayEvaluation, replay_tracking
 from bevflow.evaluation.detection import Area
+from bevflow.evaluation.spread import Spread
 from bevflow.site import Site
 from bevflow.tracking.tracker import TrackerConfig
 
@@ -66,21 +66,6 @@ class BoxPerturbation:
         xyxy[:, [1, 3]] = np.sort(xyxy[:, [1, 3]], axis=1).clip(0.0, size[1])
         seen = (xyxy[:, 2] > xyxy[:, 0]) & (xyxy[:, 3] > xyxy[:, 1])
         return Boxes(xyxy[seen], boxes.confidence[kept][seen])
-
-
-@dataclass(frozen=True)
-class Spread:
-    mean: float
-    low: float
-    high: float
-
-    @classmethod
-    def of(cls, values: Sequence[float]) -> Spread:
-        v = np.asarray(values, dtype=np.float64)
-        return cls(float(v.mean()), float(v.min()), float(v.max()))
-
-    def as_dict(self) -> dict[str, float]:
-        return {"mean": self.mean, "min": self.low, "max": self.high}
 
 
 @dataclass(frozen=True)

@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bevflow.detect.coco import CocoImage
-from bevflow.evaluation.perturbed import Spread
+from bevflow.evaluation.spread import Spread
 
 
 def turned(entry: CocoImage, image: NDArray[np.uint8], centre: tuple[float, float], degrees: float) -> tuple[CocoImage, NDArray[np.uint8]]:

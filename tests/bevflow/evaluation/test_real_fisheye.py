@@ -13,7 +13,7 @@ import pytest
 from bevflow.detect.circle import find_image_circle
 from bevflow.detect.runtime import DEFAULT_RANGES, DetectorBank
 from bevflow.detect.tiles import TILE_MODEL, load_rim_tiles
-from bevflow.evaluation.detector import detect_frames, evaluate_detector, score_frames
+from bevflow.evaluation.detector import detect_turned_frames, evaluate_detector, score_frames
 from bevflow.evaluation.turned import turn_angles
 
 FRAMES = Path(os.environ.get("BEVFLOW_REAL_FISHEYE", Path(__file__).resolve().parents[3].parent / "shared" / "data" / "real-fisheye"))
@@ -45,7 +45,7 @@ def test_rim_tiles_through_yolox_on_real_frames() -> None:
 @pytest.mark.slow
 def test_the_default_detector_on_the_real_frames_turned() -> None:
     detector = DetectorBank(DEFAULT_RANGES, score_threshold=0.05)
-    scores = [score_frames(detect_frames(detector, FRAMES / "annotations.json", FRAMES / "images", turn_deg=d)[0]) for d in turn_angles(5)]
+    scores = [score_frames(*turn) for turn in detect_turned_frames(detector, FRAMES / "annotations.json", turn_angles(5), FRAMES / "images")]
     # Measured over the five turns: AP50 0.635-0.857 (mean 0.764), AP50_rotated 0.667-0.847 (mean
     # 0.799). With each box at its tile's angle AP50 fell to 0.313 at one turn.
     assert min(s.AP50 for s in scores) >= 0.6 and sum(s.AP50 for s in scores) / 5 >= 0.74
