@@ -31,6 +31,23 @@ _SINGULAR_COS2A = 0.4
 _MIN_SIDE_PX = 1.0
 
 
+def outline_xyxy(rotated: FloatArray) -> FloatArray:
+    """(N, 5) rotated boxes → (N, 4) the axis-aligned box of the ellipse inscribed in each: the
+    upright box of a person lying in the rotated box, who fills its sides but not its corners.
+
+    The enclosing box of the rectangle (``rotated_to_xyxy``) reaches into its corners, which a
+    body does not fill: for a box three times as tall as wide at 45° it is 60 % larger. The
+    cylinder fit places the feet from the upright box's point nearest the image centre
+    (``bevflow.cylinder``), so those corners move people toward the camera. At 0° and 90° the
+    two are the same box."""
+    r = np.asarray(rotated, np.float64).reshape(-1, 5)
+    a = np.radians(r[:, 4])
+    c, s = np.cos(a), np.sin(a)
+    hw = np.hypot(c * r[:, 2], s * r[:, 3]) / 2
+    hh = np.hypot(s * r[:, 2], c * r[:, 3]) / 2
+    return np.stack([r[:, 0] - hw, r[:, 1] - hh, r[:, 0] + hw, r[:, 1] + hh], axis=1)
+
+
 def rotated_corners(rotated: FloatArray) -> FloatArray:
     """(N, 5) rotated boxes → (N, 4, 2) corners, counter-clockwise on screen."""
     r = np.asarray(rotated, np.float64).reshape(-1, 5)

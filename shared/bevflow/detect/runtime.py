@@ -328,15 +328,15 @@ class DetectorBank:
     def detect(self, image_bgr: NDArray[np.uint8], camera_height_m: float, focal_px: float) -> Boxes:
         return self.for_height(camera_height_m).detect(image_bgr, camera_height_m, focal_px)
 
-    def detect_rotated(self, image_bgr: NDArray[np.uint8], camera_height_m: float, focal_px: float,
-                       centre: tuple[float, float]) -> tuple[FloatArray, FloatArray]:  # fmt: skip
-        """Rotated boxes (N, 5) and scores: the rim-tile detector's own angles, other models'
-        boxes turned to their radial angle about ``centre``."""
+    def detect_boxes(self, image_bgr: NDArray[np.uint8], camera_height_m: float, focal_px: float,
+                     centre: tuple[float, float]) -> tuple[Boxes, FloatArray]:  # fmt: skip
+        """The pipeline's boxes and the same people's rotated boxes (N, 5): the rim-tile
+        detector's own angles, other models' boxes turned to their radial angle about ``centre``."""
         detector = self.for_height(camera_height_m)
         if isinstance(detector, Detector):
             boxes = detector.detect(image_bgr, camera_height_m, focal_px)
-            return radial_boxes(boxes.xyxy, centre), boxes.confidence
-        return detector.detect_rotated(image_bgr, camera_height_m, focal_px, centre)
+            return boxes, radial_boxes(boxes.xyxy, centre)
+        return detector.detect_boxes(image_bgr, camera_height_m, focal_px, centre)
 
     def describe(self) -> str:
         """E.g. "under 5 m: rim-tiles; from 5 m: bevflow-person-centernet"."""

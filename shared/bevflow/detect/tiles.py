@@ -15,6 +15,13 @@ AP50 0.31 to 0.85 on the real frames of docs/RESULTS.md turned five ways
 about where it was (mean 0.81 and 0.80, worst turn 0.73 and 0.67), and our renders under 5 m rose
 from 0.60 to 0.73.
 
+The pipeline gets each rotated box as its outline (``bevflow.detect.rotated.outline_xyxy``), the
+upright box of the ellipse inside it, not its enclosing rectangle: the cylinder fit places the
+feet from the upright box's corner nearest the centre, and a body does not fill the rectangle's
+corners. On renders 3–5 m up (``bevflow.evaluation.placement``) walking and standing people are
+placed 0.09–0.11 m from their feet (median) instead of 0.14–0.15 m. The centre model's boxes are
+passed on as it gave them.
+
 Tiles overlap. A box touching a tile's left or right edge is a person cut by it, whom the
 neighbouring tile holds whole (a tile reaches further than half the angle to its neighbours at
 every radius inside the circle), so such boxes are dropped; the rest are merged by rotated NMS.
@@ -34,7 +41,7 @@ render-trained models find few (docs/RESULTS.md, "Real frames").
 **Small frames.** The tiles serve low-resolution cameras too: the real frames of docs/RESULTS.md
 ("Real frames"), shrunk from 2048 to 512 or 400 px (tiles enlarged 1.7 and 2.2 times), still
 score AP50_rotated 0.84 and 0.79 through them, where the render-trained low-ceiling model scores
-0.00. Our renders under 5 m, about as coarse, score 0.73: their people are rendered, not
+0.00. Our renders under 5 m, about as coarse, score 0.78: their people are rendered, not
 photographed, and so are the people the render-trained models learnt.
 
 **Threads.** FastestDet is small: on two ONNX Runtime threads each layer's work is too little to
@@ -57,7 +64,7 @@ from numpy.typing import NDArray
 
 from bevflow.detect.circle import DEFAULT_FIELD_OF_VIEW_DEG
 from bevflow.detect.coco import rotated_to_xyxy
-from bevflow.detect.rotated import radial_angle, radial_boxes, rotated_iou_matrix
+from bevflow.detect.rotated import outline_xyxy, radial_angle, radial_boxes, rotated_iou_matrix
 from bevflow.detections import Boxes
 
 if TYPE_CHECKING:  # loaded only when a model loads, as in load_rim_tiles
@@ -103,22 +110,29 @@ class RimTileDetector:
 
     def detect(self, image_bgr: NDArray[np.uint8], camera_height_m: float, focal_px: float,
                centre: tuple[float, float] | None = None) -> Boxes:  # fmt: skip
-        """Person boxes as the pipeline takes them: each rotated box's enclosing rectangle.
-        ``centre``: the point people lie radially about (the camera's nadir in the image);
-        default the middle of ``image_bgr``."""
+        """Person boxes as the pipeline takes them (``detect_boxes``). ``centre``: the point people
+        lie radially about (the camera's nadir in the image); default the middle of ``image_bgr``."""
         h, w = image_bgr.shape[:2]
-        rotated, conf = self.detect_rotated(image_bgr, camera_height_m, focal_px, centre or ((w - 1) / 2, (h - 1) / 2))
-        return Boxes(rotated_to_xyxy(rotated), conf)
+        return self.detect_boxes(image_bgr, camera_height_m, focal_px, centre or ((w - 1) / 2, (h - 1) / 2))[0]
 
     def detect_rotated(self, image_bgr: NDArray[np.uint8], camera_height_m: float, focal_px: float,
                        centre: tuple[float, float]) -> tuple[FloatArray, FloatArray]:  # fmt: skip
-        """Rotated boxes (N, 5) and their scores; ``centre`` is the image circle's centre and its
-        radius is ``focal_px`` times the lens's half view."""
+        """Rotated boxes (N, 5) and their scores (``detect_boxes``)."""
+        boxes, rotated = self.detect_boxes(image_bgr, camera_height_m, focal_px, centre)
+        return rotated, boxes.confidence
+
+    def detect_boxes(self, image_bgr: NDArray[np.uint8], camera_height_m: float, focal_px: float,
+                     centre: tuple[float, float]) -> tuple[Boxes, FloatArray]:  # fmt: skip
+        """The pipeline's upright boxes with their scores, and the same people's rotated boxes
+        (N, 5); ``centre`` is the image circle's centre and its radius is ``focal_px`` times the
+        lens's half view. A tile's person is boxed upright by the outline of their rotated box
+        (``bevflow.detect.rotated.outline_xyxy``), the centre model's by its own box."""
         radius = focal_px * self.half_view
         k = self.tile_enlargement(radius)
         small = prefiltered(image_bgr, k)  # halved as far as it goes; the warp shrinks the rest
         k_small = small.shape[1] / image_bgr.shape[1]
         rotated, conf = self._tiles(small, k_small, centre, radius)
+        xyxy = outline_xyxy(rotated)
         if self.centre is not None:
             inner = np.hypot(rotated[:, 0] - centre[0], rotated[:, 1] - centre[1]) >= self.centre_share * radius
             # Only the middle of the frame: a person kept there reaches at most a few tenths of
@@ -132,10 +146,12 @@ class RimTileDetector:
             x0, y0 = max(0, cx - half), max(0, cy - half)
             crop = np.ascontiguousarray(small[y0 : cy + half + 1, x0 : cx + half + 1])
             boxes = self.centre.detect(crop, camera_height_m, focal_px * k_small)
-            mid = radial_boxes((boxes.xyxy + [x0, y0, x0, y0]) / k_small, centre)
+            found = (boxes.xyxy + [x0, y0, x0, y0]) / k_small
+            mid = radial_boxes(found, centre)
             near = np.hypot(mid[:, 0] - centre[0], mid[:, 1] - centre[1]) < self.centre_share * radius
-            rotated, conf = np.concatenate([rotated[inner], mid[near]]), np.concatenate([conf[inner], boxes.confidence[near]])
-        return rotated, conf
+            rotated, xyxy = np.concatenate([rotated[inner], mid[near]]), np.concatenate([xyxy[inner], found[near]])
+            conf = np.concatenate([conf[inner], boxes.confidence[near]])
+        return Boxes(xyxy, conf), rotated
 
     def _detect_tiles(self, small: NDArray[np.uint8], maps: list[FloatArray]) -> list[Boxes]:
         """Each tile's boxes, in the order of ``maps`` (frame to tile): cut and detected in one go,

@@ -4,8 +4,10 @@ F1 at the score threshold that maximises F1.
 Matching follows COCO/VOC: in each image, detections are taken best score first and each is
 matched to the unmatched ground-truth box it overlaps most, if their IoU is at least 0.5; the
 rest are false positives. AP is the area under the precision–recall curve with precision made
-monotone (all-point interpolation, as VOC since 2010 and COCO do). Rotated ground-truth boxes
-count as their enclosing axis-aligned rectangles (``bevflow.detect.coco``) for AP50.
+monotone (all-point interpolation, as VOC since 2010 and COCO do). A rotated ground-truth box
+counts for AP50 as the upright box of the person lying in it, the outline of the ellipse inside
+it (``bevflow.detect.rotated.outline_xyxy``): the box the rim tiles give the pipeline for the
+same rotated box, and about what an annotator drawing upright boxes would draw.
 
 ``AP50_rotated`` scores as CEPDOF, WEPDTOF and RAPiD do: IoU between rotated boxes
 (``bevflow.detect.rotated``), truth as annotated. A detection without an angle is turned to its
@@ -31,8 +33,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bevflow.detect.circle import AssumedCalibration, assume_calibration
-from bevflow.detect.coco import CocoImage, read_coco, rotated_to_xyxy
-from bevflow.detect.rotated import radial_boxes, rotated_iou_matrix
+from bevflow.detect.coco import CocoImage, read_coco
+from bevflow.detect.rotated import outline_xyxy, radial_boxes, rotated_iou_matrix
 from bevflow.detections import Boxes
 from bevflow.evaluation.turned import turned
 
@@ -159,10 +161,10 @@ def score_boxes(
 
 class ImageDetector(Protocol):
     """What ``evaluate_detector`` needs (``bevflow.detect.runtime.Detector`` is one). A detector
-    that knows each box's angle also has ``detect_rotated(image, camera_height_m, focal_px,
-    centre) -> (rotated (N, 5), confidence (N,))``; the others' boxes are turned to their radial
-    angle about the image circle's centre for ``AP50_rotated``. Frames given a plain scale need
-    a ``ScaledDetector``."""
+    that knows each box's angle also has ``detect_boxes(image, camera_height_m, focal_px,
+    centre) -> (Boxes, rotated (N, 5))``, the pipeline's boxes and the same people's rotated
+    ones; the others' boxes are turned to their radial angle about the image circle's centre for
+    ``AP50_rotated``. Frames given a plain scale need a ``ScaledDetector``."""
 
     def detect(self, image_bgr: NDArray[np.uint8], camera_height_m: float, focal_px: float) -> Boxes: ...
 
@@ -204,9 +206,9 @@ def frame_setup(entry: CocoImage, image: NDArray[np.uint8], camera_height_m: flo
 
 def run_on_frame(detector: ImageDetector, image: NDArray[np.uint8], setup: FrameSetup) -> tuple[FloatArray, FloatArray, FloatArray]:
     """(xyxy (N, 4), rotated (N, 5), confidence (N,)) of one frame."""
-    if setup.scale is None and hasattr(detector, "detect_rotated"):
-        rotated, conf = detector.detect_rotated(image, setup.camera_height_m, setup.focal_px, setup.centre)
-        return rotated_to_xyxy(rotated), np.asarray(rotated, np.float64).reshape(-1, 5), np.asarray(conf, np.float64)
+    if setup.scale is None and hasattr(detector, "detect_boxes"):
+        boxes, rotated = detector.detect_boxes(image, setup.camera_height_m, setup.focal_px, setup.centre)
+        return boxes.xyxy, np.asarray(rotated, np.float64).reshape(-1, 5), boxes.confidence
     if setup.scale is not None:
         if not isinstance(detector, ScaledDetector):
             raise ValueError("this detector needs each frame's camera height and focal length, not a scale")
@@ -227,6 +229,11 @@ class FrameResult:
     xyxy: FloatArray
     rotated: FloatArray
     confidence: FloatArray
+
+    @property
+    def truth_xyxy(self) -> FloatArray:
+        """The truth as upright boxes: as annotated, or (rotated files) each box's outline."""
+        return outline_xyxy(self.entry.rotated) if self.entry.oriented else self.entry.xyxy
 
     @property
     def truth_rotated(self) -> FloatArray:
@@ -302,7 +309,7 @@ def read_image(path: Path) -> NDArray[np.uint8]:
 
 
 def score_frames(results: Sequence[FrameResult], ms_per_frame: float | None = None) -> DetectorScores:
-    scores = score_boxes([r.xyxy for r in results], [r.confidence for r in results], [r.entry.xyxy for r in results],
+    scores = score_boxes([r.xyxy for r in results], [r.confidence for r in results], [r.truth_xyxy for r in results],
                          rotated_detections=[r.detections_rotated for r in results],
                          rotated_truth=[r.truth_rotated for r in results])  # fmt: skip
     return replace(scores, ms_per_frame=ms_per_frame)

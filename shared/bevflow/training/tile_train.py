@@ -9,12 +9,10 @@ better half of them by IoU are positives, their objectness target is that IoU, b
 objectness loss. The class head and the first layers stay as COCO left them (``FROZEN``).
 
 Measured so far, it does not pay: renders alone lower the real-frame scores (docs/RESULTS.md,
-"Real frames"), so the shipped tile model is FastestDet's COCO weights unchanged.
-
-    python -m bevflow.training.tile_train --data TILES --out RUN --steps 3000
-
-Checkpoints (``RUN/checkpoint.pt``) are written every few minutes; running the same command
-again resumes. ``--export FILE`` writes the ONNX model the rim-tile detector loads.
+"Real frames"), so the shipped tile model is FastestDet's COCO weights unchanged. At 352 px, 400
+to 500 steps on 1,920 tiles of 240 renders: training the head alone (the backbone and SPP frozen
+too) gave the rendered frames under 5 m AP50 0.81 and the real frames 0.71 / AP50_rotated 0.74;
+training all but ``FROZEN`` gave 0.87 and 0.36 / 0.35; unchanged, 0.78 and 0.87 / 0.85.
 """
 
 from __future__ import annotations

@@ -25,7 +25,8 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 
-from bevflow.detect.coco import CocoImage, rotated_to_xyxy
+from bevflow.detect.coco import CocoImage
+from bevflow.detect.rotated import outline_xyxy
 from bevflow.detect.scaling import scale_factor
 from bevflow.training.augment import augment_sample, boxes_from_owner, clahe, jitter_colors, rotate_rotated_boxes
 from bevflow.training.dataset import read_shards
@@ -150,8 +151,8 @@ class ShardSampler:
 class CocoSampler:
     """Random augmented batches from a user's annotated frames (``bevflow.detect.coco``). Each
     image is brought to the detector's scale times ``zoom`` (from its ``camera_height_m`` and
-    ``focal_px``, else by ``scale``), rotated about its centre (rotated boxes turn with it; their enclosing
-    rectangles are the targets), flipped, equalised, and cropped."""
+    ``focal_px``, else by ``scale``), rotated about its centre (rotated boxes turn with it; their outlines,
+    ``bevflow.detect.rotated.outline_xyxy``, are the targets), flipped, equalised, and cropped."""
 
     def __init__(self, images: list[CocoImage], crop: int, rng: np.random.Generator, scale: float = 1.0,
                  zoom: float = 1.0) -> None:
@@ -192,7 +193,7 @@ class CocoSampler:
         pad[:h, :w] = img
         y0 = int(self.rng.integers(0, pad.shape[0] - self.crop + 1))
         x0 = int(self.rng.integers(0, pad.shape[1] - self.crop + 1))
-        boxes = rotated_to_xyxy(r) - [x0, y0, x0, y0]
+        boxes = outline_xyxy(r) - [x0, y0, x0, y0]
         return pad[y0 : y0 + self.crop, x0 : x0 + self.crop], boxes
 
 

@@ -9,7 +9,15 @@ import numpy as np
 import pytest
 
 from bevflow.detect.coco import rotated_to_xyxy
-from bevflow.detect.rotated import convex_intersection, polygon_area, radial_angle, radial_boxes, rotated_corners, rotated_iou_matrix
+from bevflow.detect.rotated import (
+    convex_intersection,
+    outline_xyxy,
+    polygon_area,
+    radial_angle,
+    radial_boxes,
+    rotated_corners,
+    rotated_iou_matrix,
+)
 
 OCTAGON = 4 * (2 * math.sqrt(2) - 2)  # a 2 × 2 square ∩ itself turned 45°: a regular octagon
 
@@ -85,3 +93,21 @@ def test_radial_boxes_near_45_degrees_blend_into_a_square_with_the_same_enclosin
     back = radial_boxes(box, (0.0, 0.0))
     assert back[0, 2] == pytest.approx(back[0, 3])
     assert rotated_to_xyxy(back)[0] == pytest.approx(box[0])
+
+
+@pytest.mark.parametrize(
+    ("box", "expected"),
+    [
+        ([50, 40, 10, 30, 0], [45, 25, 55, 55]),  # upright: the box itself
+        ([50, 40, 10, 30, 90], [35, 35, 65, 45]),  # a quarter turn: width and height swap
+        ([50, 40, 10, 30, 180], [45, 25, 55, 55]),  # a half turn is the same box
+        ([0, 0, 20, 20, 45], [-10, -10, 10, 10]),  # a square's circle is the same at every angle
+        ([0, 0, 10, 30, 45], [-(500**0.5) / 2, -(500**0.5) / 2, (500**0.5) / 2, (500**0.5) / 2]),  # √((10² + 30²) / 2)
+        ([0, 0, 10, 30, 30], [-(300**0.5) / 2, -(700**0.5) / 2, (300**0.5) / 2, (700**0.5) / 2]),  # (10 cos, 30 sin) and (10 sin, 30 cos)
+    ],
+)
+def test_outline_is_the_upright_box_of_the_ellipse_inside(box: list[float], expected: list[float]) -> None:
+    got = outline_xyxy(np.array([box], float))[0]
+    assert got == pytest.approx(expected, abs=1e-3)
+    enclosing = rotated_to_xyxy(np.array([box], float))[0]
+    assert (got[:2] >= enclosing[:2] - 1e-9).all() and (got[2:] <= enclosing[2:] + 1e-9).all()  # inside the rectangle's

@@ -11,7 +11,8 @@ import cv2
 import numpy as np
 import pytest
 
-from bevflow.detect.rotated import rotated_corners, rotated_iou_matrix
+from bevflow.detect.coco import rotated_to_xyxy
+from bevflow.detect.rotated import outline_xyxy, rotated_corners, rotated_iou_matrix
 from bevflow.detect.tiles import RIM_TILES, TILE_MODEL, RimTileDetector, TileLayout, prefiltered, rotated_nms
 from bevflow.detections import Boxes
 
@@ -70,13 +71,38 @@ def test_a_person_lying_along_the_radius_is_found_once_with_its_angle(degrees: f
     assert rotated_iou_matrix(rotated, np.array([person]))[0, 0] > (0.8 if degrees % 45 == 0 else 0.4)
 
 
-def test_people_all_round_are_each_found_and_enclosing_boxes_are_returned_for_the_pipeline() -> None:
+def test_people_all_round_are_each_found_and_their_outlines_are_returned_for_the_pipeline() -> None:
     people = [_radial_person(d, r) for d, r in [(10.0, 90.0), (100.0, 130.0), (190.0, 70.0), (280.0, 150.0)]]
     detector = RimTileDetector(UprightBlobs())
-    rotated, _ = detector.detect_rotated(_frame(people), 3.0, FOCAL, CENTRE)
+    rotated, conf = detector.detect_rotated(_frame(people), 3.0, FOCAL, CENTRE)
     assert (rotated_iou_matrix(rotated, np.array(people)).max(axis=0) > 0.4).all() and len(rotated) == 4
     boxes = detector.detect(_frame(people), 3.0, FOCAL, CENTRE)
-    assert len(boxes) == 4
+    assert np.allclose(boxes.xyxy, outline_xyxy(rotated)) and np.array_equal(boxes.confidence, conf)
+
+
+class CentreBoxes:
+    """Stands in for the centre model: one upright box 30 × 45 px, 25 px right of and below the
+    middle of what it is given (the centre of the frame), where the radial angle is 45°."""
+
+    def detect(self, image_bgr: np.ndarray, camera_height_m: float, focal_px: float) -> Boxes:
+        x, y = image_bgr.shape[1] / 2 + 25, image_bgr.shape[0] / 2 + 25
+        return Boxes([[x - 15, y - 22.5, x + 15, y + 22.5]], [0.8])
+
+
+def test_the_centre_model_keeps_its_own_box_and_tile_people_get_their_outline() -> None:
+    person = _radial_person(45.0, 120.0)  # 45° off upright: its outline is well inside its enclosing box
+    detector = RimTileDetector(UprightBlobs(), centre=CentreBoxes())  # type: ignore[arg-type]
+    boxes, rotated = detector.detect_boxes(_frame([person]), 3.0, FOCAL, CENTRE)
+    assert len(boxes) == len(rotated) == 2
+    tile, centre = np.argsort(-np.hypot(rotated[:, 0] - CENTRE[0], rotated[:, 1] - CENTRE[1]))
+    w, h = boxes.xyxy[centre, 2:] - boxes.xyxy[centre, :2]
+    assert (w, h) == pytest.approx((30, 45))  # as the model gave it, not turned radially and back
+    assert np.allclose(boxes.xyxy[tile], outline_xyxy(rotated[tile : tile + 1])[0])
+    assert _area(boxes.xyxy[tile]) < 0.8 * _area(rotated_to_xyxy(rotated[tile : tile + 1])[0])
+
+
+def _area(xyxy: np.ndarray) -> float:
+    return float((xyxy[2] - xyxy[0]) * (xyxy[3] - xyxy[1]))
 
 
 def test_a_sideways_blob_is_not_upright_in_any_tile() -> None:

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from bevflow.detect.coco import read_coco, rotated_to_xyxy
-from bevflow.detect.rotated import radial_angle, rotated_iou_matrix
+from bevflow.detect.rotated import outline_xyxy, radial_angle, rotated_iou_matrix
 from bevflow.detections import Boxes
 from bevflow.evaluation.detector import detect_frames, evaluate_detector, frame_setup, score_boxes, score_frames
 from bevflow.evaluation.drawing import HIT, MISS, TRUTH, write_drawings
@@ -82,11 +82,39 @@ def test_a_detector_with_angles_is_scored_by_them(tmp_path: Path) -> None:
     ann = _rotated_set(tmp_path, [person])
 
     class Rotating:
-        def detect_rotated(self, image, camera_height_m, focal_px, centre):  # noqa: ANN001, ANN201
-            return np.array([person]), np.array([0.7])
+        def detect_boxes(self, image, camera_height_m, focal_px, centre):  # noqa: ANN001, ANN201
+            return Boxes(outline_xyxy(np.array([person])), [0.7]), np.array([person])
 
     assert evaluate_detector(Rotating(), ann).AP50_rotated == pytest.approx(1.0)
     assert evaluate_detector(_Enclosing(np.array([person])), ann).AP50_rotated == 0.0  # turned radially: wrong
+
+
+class _Upright:
+    """An upright detector that gives the boxes it is made with."""
+
+    def __init__(self, xyxy: np.ndarray) -> None:
+        self.xyxy = xyxy
+
+    def detect(self, image, camera_height_m, focal_px):  # noqa: ANN001, ANN201
+        return Boxes(self.xyxy, np.full(len(self.xyxy), 0.8))
+
+
+@pytest.mark.parametrize(
+    ("side_factor", "ap50"),
+    [
+        (1.0, 1.0),  # the outline itself
+        (800**0.5 / 500**0.5, 1.0),  # the enclosing rectangle: IoU 500 / 800 with the outline
+        (1.15 * 800**0.5 / 500**0.5, 0.0),  # a little larger: IoU 0.47 with the outline, 0.76 with the rectangle
+    ],
+)
+def test_rotated_truth_counts_as_its_outline_for_ap50(tmp_path: Path, side_factor: float, ap50: float) -> None:
+    person = [100.0, 150.0, 10.0, 30.0, 45.0]  # outline 22.4 px square, enclosing rectangle 28.3 px
+    ann = _rotated_set(tmp_path, [person])
+    half = side_factor * 500**0.5 / 2
+    s = evaluate_detector(_Upright(np.array([[100 - half, 150 - half, 100 + half, 150 + half]])), ann)
+    assert s.AP50 == pytest.approx(ap50)
+    [result], _ = detect_frames(_Upright(np.zeros((0, 4))), ann)
+    assert np.allclose(result.truth_xyxy, outline_xyxy(np.array([person])))
 
 
 @pytest.mark.parametrize(
