@@ -13,6 +13,12 @@ Measured so far, it does not pay: renders alone lower the real-frame scores (doc
 to 500 steps on 1,920 tiles of 240 renders: training the head alone (the backbone and SPP frozen
 too) gave the rendered frames under 5 m AP50 0.81 and the real frames 0.71 / AP50_rotated 0.74;
 training all but ``FROZEN`` gave 0.87 and 0.36 / 0.35; unchanged, 0.78 and 0.87 / 0.85.
+
+    python -m bevflow.training.tile_train --data TILES --out RUN --steps 3000
+
+Checkpoints (``RUN/checkpoint.pt``) are written every few minutes; running the same command
+again resumes (or, once trained, only exports). ``--export FILE`` writes the ONNX model the
+rim-tile detector loads, ``--share F`` the weights F of the way from COCO's to the fine-tuned.
 """
 
 from __future__ import annotations
@@ -200,11 +206,28 @@ def _save(path: Path, model: FastestDet, opt: torch.optim.Optimizer, step: int, 
     tmp.replace(path)
 
 
-def export_tiles(checkpoint: Path, out: Path, input_px: int) -> Path:
-    """The fine-tuned network as an ONNX file of fixed input ``input_px`` square (BGR / 255)."""
+def export_tiles(checkpoint: Path, out: Path, input_px: int, coco: Path | None = None, share: float = 1.0) -> Path:
+    """The fine-tuned network as an ONNX file of fixed input ``input_px`` square (BGR / 255); with
+    ``coco`` (FastestDet's COCO state dict), its weights are ``share`` × the fine-tuned ones plus
+    the rest × COCO's (``interpolated``)."""
+    state = torch.load(checkpoint, map_location="cpu", weights_only=False)["model"]
+    if coco is not None:
+        state = interpolated(state, torch.load(coco, map_location="cpu", weights_only=True), share)
     model = FastestDet()
-    model.load_state_dict(torch.load(checkpoint, map_location="cpu", weights_only=False)["model"])
+    model.load_state_dict(state)
     return export_onnx(model, out, input_px)
+
+
+def interpolated(fine_tuned: dict[str, torch.Tensor], start: dict[str, torch.Tensor], share: float) -> dict[str, torch.Tensor]:
+    """``share`` of the way from ``start``'s weights to ``fine_tuned``'s, every floating-point
+    tensor alike (batch-norm statistics included); counters are the fine-tuned ones. Fine-tuned
+    weights learn the new images and forget the old; a point between them keeps much of both
+    (Wortsman et al., "Robust fine-tuning of zero-shot models", CVPR 2022)."""
+    if not 0.0 <= share <= 1.0:
+        raise ValueError(f"share must be within [0, 1], got {share}")
+    if fine_tuned.keys() != start.keys():
+        raise ValueError("the two state dicts hold different tensors")
+    return {k: torch.lerp(start[k], v, share) if v.is_floating_point() else v for k, v in fine_tuned.items()}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -213,13 +236,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument("--weights", type=Path, required=True, help="FastestDet's COCO state dict (.pth)")
     parser.add_argument("--steps", type=int, default=TileTrainConfig.steps)
+    parser.add_argument("--batch", type=int, default=TileTrainConfig.batch)
+    parser.add_argument("--lr", type=float, default=TileTrainConfig.lr)
+    parser.add_argument("--warmup", type=int, default=TileTrainConfig.warmup, help="steps of rising learning rate")
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--export", type=Path, help="write the ONNX model here after training")
     parser.add_argument("--input-px", type=int, default=256)
+    parser.add_argument("--share", type=float, default=1.0,
+                        help="with --export: the exported weights are this share of the way from --weights to the fine-tuned ones")  # fmt: skip
     args = parser.parse_args(argv)
-    ckpt = train_tiles(args.data, args.out, args.weights, TileTrainConfig(steps=args.steps, threads=args.threads))
+    config = TileTrainConfig(steps=args.steps, batch=args.batch, lr=args.lr, warmup=args.warmup, threads=args.threads)
+    ckpt = train_tiles(args.data, args.out, args.weights, config)
     if args.export:
-        export_tiles(ckpt, args.export, args.input_px)
+        export_tiles(ckpt, args.export, args.input_px, args.weights if args.share < 1 else None, args.share)
     return 0
 
 

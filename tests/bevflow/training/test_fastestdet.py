@@ -10,7 +10,7 @@ torch = pytest.importorskip("torch")
 
 from bevflow.detect.decoders import decode_fastestdet  # noqa: E402
 from bevflow.training.fastestdet import FastestDet, ShuffleBlock  # noqa: E402
-from bevflow.training.tile_train import tile_loss  # noqa: E402
+from bevflow.training.tile_train import interpolated, tile_loss  # noqa: E402
 
 
 @pytest.mark.parametrize("size", [(64, 64), (96, 160)])
@@ -45,3 +45,30 @@ def test_the_loss_prefers_the_true_box_and_decodes_to_it() -> None:
     assert float(tile_loss(good, [truth])[0]) < float(tile_loss(bad, [truth])[0])
     xyxy, scores = decode_fastestdet(good[0].numpy(), (64, 64), 0.5)
     assert len(xyxy) == 4 and np.allclose(xyxy, [20, 12, 36, 44], atol=1e-3) and np.allclose(scores, 1.0)
+
+
+@pytest.mark.parametrize(
+    ("share", "weight", "counter"),
+    [
+        (0.0, 1.0, 7),  # all the start's weights; counters always the fine-tuned ones
+        (0.25, 1.75, 7),
+        (1.0, 4.0, 7),
+    ],
+)
+def test_interpolated_weights_lie_between_the_start_and_the_fine_tuned(share: float, weight: float, counter: int) -> None:
+    start = {"w": torch.ones(2), "n": torch.tensor(3)}
+    tuned = {"w": torch.full((2,), 4.0), "n": torch.tensor(7)}
+    got = interpolated(tuned, start, share)
+    assert torch.allclose(got["w"], torch.full((2,), weight)) and int(got["n"]) == counter
+
+
+@pytest.mark.parametrize(
+    ("tuned", "share", "message"),
+    [
+        ({"w": torch.ones(2)}, 1.5, "within"),
+        ({"v": torch.ones(2)}, 0.5, "different tensors"),
+    ],
+)
+def test_interpolated_refuses(tuned: dict, share: float, message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        interpolated(tuned, {"w": torch.zeros(2)}, share)
