@@ -28,8 +28,8 @@ def add_detector_arguments(parser: argparse.ArgumentParser) -> None:
                        "photographs (default: what a site gets, by each frame's camera height: rim-tiles under 5 m, "
                        "the shipped general model from 5 m)")  # fmt: skip
     group.add_argument("--tile-model", type=Path, metavar="MODEL",
-                       help="with rim-tiles: the ONNX model run on the tiles, a file or a shipped model's name (default: the shipped FastestDet; the "
-                       "shipped yolox-nano-coco.onnx beside it is more accurate and slower)")  # fmt: skip
+                       help="with rim-tiles: the ONNX model run on the tiles, a file or a shipped model's name (default: the shipped FastestDet, "
+                       "fastestdet-tiles; fastestdet-coco is its COCO weights as published, yolox-nano-coco more accurate and slower)")  # fmt: skip
     group.add_argument("--annotations", type=Path, metavar="FILE", help="COCO JSON of the --images: bbox [x,y,w,h] or rotated [cx,cy,w,h,deg]")
     group.add_argument("--threads", type=int, default=2, metavar="N", help="ONNX Runtime threads (default 2)")
     group.add_argument("--camera-height", type=float, metavar="M", help="camera height for images without 'camera_height_m' (with --focal)")

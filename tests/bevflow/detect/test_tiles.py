@@ -134,8 +134,8 @@ def test_rotated_nms(boxes: list, scores: list, kept: list) -> None:
 
 
 def test_the_shipped_tile_model_is_named() -> None:
-    assert RIM_TILES == "rim-tiles" and TILE_MODEL.name == "fastestdet-coco.onnx" and TILE_MODEL.is_file()
-    for model in ("fastestdet-coco", "yolox-nano-coco"):  # both ship under their own licence
+    assert RIM_TILES == "rim-tiles" and TILE_MODEL.name == "fastestdet-tiles.onnx" and TILE_MODEL.is_file()
+    for model in ("fastestdet-tiles", "fastestdet-coco", "yolox-nano-coco"):  # each ships under its own licence
         assert (TILE_MODEL.parent / f"LICENSE-{model}.txt").is_file() and f"{model}.onnx" in (ROOT / "NOTICE").read_text()
 
 

@@ -30,23 +30,30 @@ def test_the_image_circle_of_a_real_frame() -> None:
 def test_the_default_detector_on_real_frames_with_nothing_given() -> None:
     s = evaluate_detector(DetectorBank(DEFAULT_RANGES, score_threshold=0.05), FRAMES / "annotations.json", FRAMES / "images")
     assert s.annotations == 82
-    # Measured 0.847 and 0.868 (rim tiles through FastestDet, the frames assumed 3 m up); a person
-    # is about 0.012. The bar is 0.75 and 0.65.
-    assert s.AP50_rotated >= 0.83 and s.AP50 >= 0.85
+    # Measured 0.840 and 0.786 (rim tiles through fastestdet-tiles, the frames assumed 3 m up); a
+    # person is about 0.012. The bar is 0.75 and 0.65.
+    assert s.AP50_rotated >= 0.82 and s.AP50 >= 0.76
 
 
 @pytest.mark.slow
-def test_rim_tiles_through_yolox_on_real_frames() -> None:
-    s = evaluate_detector(load_rim_tiles(score_threshold=0.05, tile_model=YOLOX), FRAMES / "annotations.json", FRAMES / "images")
-    # Measured 0.956 and 0.910.
-    assert s.AP50_rotated >= 0.90 and s.AP50 >= 0.88
+@pytest.mark.parametrize(
+    ("tile_model", "rotated", "aligned"),
+    [
+        (YOLOX, 0.90, 0.88),  # measured 0.956 and 0.910
+        (TILE_MODEL.with_name("fastestdet-coco.onnx"), 0.83, 0.85),  # FastestDet as published: 0.847 and 0.868
+    ],
+)
+def test_rim_tiles_through_other_shipped_models_on_real_frames(tile_model: Path, rotated: float, aligned: float) -> None:
+    s = evaluate_detector(load_rim_tiles(score_threshold=0.05, tile_model=tile_model), FRAMES / "annotations.json", FRAMES / "images")
+    assert s.AP50_rotated >= rotated and s.AP50 >= aligned
 
 
 @pytest.mark.slow
 def test_the_default_detector_on_the_real_frames_turned() -> None:
     detector = DetectorBank(DEFAULT_RANGES, score_threshold=0.05)
     scores = [score_frames(*turn) for turn in detect_turned_frames(detector, FRAMES / "annotations.json", turn_angles(5), FRAMES / "images")]
-    # Measured over the five turns: AP50 0.566-0.868 (mean 0.778), AP50_rotated 0.667-0.847 (mean
-    # 0.799). With each box at its tile's angle AP50 fell to 0.313 at one turn.
-    assert min(s.AP50 for s in scores) >= 0.53 and sum(s.AP50 for s in scores) / 5 >= 0.75
-    assert min(s.AP50_rotated for s in scores) >= 0.64 and sum(s.AP50_rotated for s in scores) / 5 >= 0.77
+    # Measured over the five turns: AP50 0.579-0.849 (mean 0.772), AP50_rotated 0.724-0.848 (mean
+    # 0.805); with FastestDet's COCO weights as published, 0.566-0.868 (0.778) and 0.667-0.847
+    # (0.799). With each box at its tile's angle AP50 fell to 0.313 at one turn.
+    assert min(s.AP50 for s in scores) >= 0.54 and sum(s.AP50 for s in scores) / 5 >= 0.75
+    assert min(s.AP50_rotated for s in scores) >= 0.69 and sum(s.AP50_rotated for s in scores) / 5 >= 0.78
