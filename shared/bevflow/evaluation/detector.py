@@ -160,13 +160,21 @@ def score_boxes(
 
 
 class ImageDetector(Protocol):
-    """What ``evaluate_detector`` needs (``bevflow.detect.runtime.Detector`` is one). A detector
-    that knows each box's angle also has ``detect_boxes(image, camera_height_m, focal_px,
-    centre) -> (Boxes, rotated (N, 5))``, the pipeline's boxes and the same people's rotated
-    ones; the others' boxes are turned to their radial angle about the image circle's centre for
-    ``AP50_rotated``. Frames given a plain scale need a ``ScaledDetector``."""
+    """What ``evaluate_detector`` needs (``bevflow.detect.runtime.Detector`` is one). A
+    ``RotationAwareDetector`` gives each box's angle; the others' boxes are turned to their radial
+    angle about the image circle's centre for ``AP50_rotated``. Frames given a plain scale need a
+    ``ScaledDetector``."""
 
     def detect(self, image_bgr: NDArray[np.uint8], camera_height_m: float, focal_px: float) -> Boxes: ...
+
+
+@runtime_checkable
+class RotationAwareDetector(Protocol):
+    """A detector that knows each box's angle (the rim tiles, ``DetectorBank``): the pipeline's
+    boxes and the same people's rotated boxes (N, 5), about ``centre``, the image circle's."""
+
+    def detect_boxes(self, image_bgr: NDArray[np.uint8], camera_height_m: float, focal_px: float,
+                     centre: tuple[float, float]) -> tuple[Boxes, FloatArray]: ...  # fmt: skip
 
 
 @runtime_checkable
@@ -206,17 +214,17 @@ def frame_setup(entry: CocoImage, image: NDArray[np.uint8], camera_height_m: flo
 
 def run_on_frame(detector: ImageDetector, image: NDArray[np.uint8], setup: FrameSetup) -> tuple[FloatArray, FloatArray, FloatArray]:
     """(xyxy (N, 4), rotated (N, 5), confidence (N,)) of one frame."""
-    if setup.scale is None and hasattr(detector, "detect_boxes"):
-        boxes, rotated = detector.detect_boxes(image, setup.camera_height_m, setup.focal_px, setup.centre)
-        return boxes.xyxy, np.asarray(rotated, np.float64).reshape(-1, 5), boxes.confidence
     if setup.scale is not None:
         if not isinstance(detector, ScaledDetector):
             raise ValueError("this detector needs each frame's camera height and focal length, not a scale")
         boxes = detector.detect_scaled(image, setup.scale)
-    elif setup.camera_height_m is not None and setup.focal_px is not None:
-        boxes = detector.detect(image, setup.camera_height_m, setup.focal_px)
-    else:
+    elif setup.camera_height_m is None or setup.focal_px is None:
         raise ValueError("a frame needs either a scale or its camera's height and focal length")
+    elif isinstance(detector, RotationAwareDetector):
+        boxes, rotated = detector.detect_boxes(image, setup.camera_height_m, setup.focal_px, setup.centre)
+        return boxes.xyxy, np.asarray(rotated, np.float64).reshape(-1, 5), boxes.confidence
+    else:
+        boxes = detector.detect(image, setup.camera_height_m, setup.focal_px)
     return boxes.xyxy, radial_boxes(boxes.xyxy, setup.centre), boxes.confidence
 
 

@@ -27,7 +27,6 @@ import argparse
 import math
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
-from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -38,7 +37,7 @@ from bevflow.cylinder import fit_cylinders
 from bevflow.detect.coco import rotated_to_xyxy
 from bevflow.detect.scaling import scaled_focal
 from bevflow.detections import Boxes
-from bevflow.evaluation.detector import iou_matrix
+from bevflow.evaluation.detector import RotationAwareDetector, iou_matrix
 from bevflow.sim.bodies import BodyShape, Posture, pose_bodies
 from bevflow.sim.render import FisheyeRenderer, Room
 from bevflow.sim.render_textures import Appearance, RenderStyle
@@ -48,11 +47,6 @@ FITS = ("pipeline", "enclosing", "rendered")
 MATCH_IOU = 0.3
 FIELD_OF_VIEW_DEG = 190.0
 LOW_CEILINGS_M = (3.0, 5.0)  # where the rim tiles serve by default
-
-
-class RotationAwareDetector(Protocol):
-    def detect_boxes(self, image_bgr: NDArray[np.uint8], camera_height_m: float, focal_px: float,
-                     centre: tuple[float, float]) -> tuple[Boxes, FloatArray]: ...  # fmt: skip
 
 
 @dataclass(frozen=True)
