@@ -47,18 +47,22 @@ their people are rendered, not photographed, and so are the people the render-tr
 learnt.
 
 **Threads.** FastestDet is small: on two ONNX Runtime threads each layer's work is too little to
-share, and eight tiles took 32 ms on two threads against 46 ms on one. Shared among two workers of
-one thread each, two tiles at a time, they take 26 ms (2048 px frames, 2 cores).
+share, and eight tiles took 32 ms on two threads against 46 ms on one. So each tile, and the
+centre model's crop, is a job of its own for the first free of ``workers`` workers of one thread
+each, one tile a call (four tiles in one call took 17 ms, one at a time 14.5: a batch's
+activations outgrow the cache), the centre model's job first so that it runs beside the tiles.
+On a 2048 px frame on 2 cores that took 29–31 ms where two workers with four tiles each and the
+centre model after them took 32–34 in the same runs (docs/BENCHMARKS.md).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Unpack
+from typing import TYPE_CHECKING, Any, TypeVar, Unpack
 
 import cv2
 import numpy as np
@@ -76,6 +80,7 @@ FloatArray = NDArray[np.float64]
 EDGE_PX = 2.0  # a box this close to a tile's side edge is cut by it
 CENTRE_MARGIN_SHARE = 0.25  # of the radius: how far a person kept by the centre model may reach out
 PREFILTER_SIGMA_PX = 0.5  # the smoothing before the warp shrinks a frame (prefiltered)
+T = TypeVar("T")
 
 
 @dataclass(frozen=True)
@@ -91,10 +96,10 @@ class TileLayout:
 
 class RimTileDetector:
     """``tile_detector``: a ``bevflow.detect.runtime.Detector`` with a fixed square input (e.g.
-    FastestDet), given a frame's tiles in one ``detect_batch_scaled`` call per worker. ``centre``:
-    optional detector (with ``detect(image, height, focal)``) for the people right under the
-    camera, run on the middle of the frame only. ``workers``: threads the tiles are shared among,
-    each a call of its own (module docstring, "Threads")."""
+    FastestDet), given one tile a ``detect_scaled`` call. ``centre``: optional detector (with
+    ``detect(image, height, focal)``) for the people right under the camera, run on the middle of
+    the frame only. ``workers``: threads the tiles and the centre model's crop are shared among,
+    each a job of its own (module docstring, "Threads")."""
 
     def __init__(self, tile_detector: Detector, layout: TileLayout = TileLayout(), centre: Detector | None = None,
                  centre_share: float = 0.3, field_of_view_deg: float = DEFAULT_FIELD_OF_VIEW_DEG,
@@ -133,42 +138,55 @@ class RimTileDetector:
         k = self.tile_enlargement(radius)
         small = prefiltered(image_bgr, k)  # halved as far as it goes; the warp shrinks the rest
         k_small = small.shape[1] / image_bgr.shape[1]
+        # The centre model's job goes first, so that it runs beside the tiles, not after them.
+        middle = self._run(self._centre_boxes, image_bgr, small, k_small, camera_height_m, focal_px, centre) if self.centre else None
         rotated, conf = self._tiles(small, k_small, centre, radius)
         xyxy = outline_xyxy(rotated)
-        if self.centre is not None:
-            inner = np.hypot(rotated[:, 0] - centre[0], rotated[:, 1] - centre[1]) >= self.centre_share * radius
-            # Only the middle of the frame: a person kept there reaches at most a few tenths of
-            # the radius beyond ``centre_share``. The halved frame serves where the centre model
-            # shrinks it further anyway (rim tiles on cameras under about 8 m).
-            scale_for = getattr(self.centre, "scale_for", None)
-            if scale_for is not None and scale_for(camera_height_m, focal_px) > k_small:
-                small, k_small = image_bgr, 1.0
-            half = int(math.ceil((self.centre_share + CENTRE_MARGIN_SHARE) * radius * k_small))
-            cx, cy = int(centre[0] * k_small), int(centre[1] * k_small)
-            x0, y0 = max(0, cx - half), max(0, cy - half)
-            crop = np.ascontiguousarray(small[y0 : cy + half + 1, x0 : cx + half + 1])
-            boxes = self.centre.detect(crop, camera_height_m, focal_px * k_small)
-            found = (boxes.xyxy + [x0, y0, x0, y0]) / k_small
+        if middle is not None:
+            found, found_conf = middle.result()
             mid = radial_boxes(found, centre)
             near = np.hypot(mid[:, 0] - centre[0], mid[:, 1] - centre[1]) < self.centre_share * radius
+            inner = np.hypot(rotated[:, 0] - centre[0], rotated[:, 1] - centre[1]) >= self.centre_share * radius
             rotated, xyxy = np.concatenate([rotated[inner], mid[near]]), np.concatenate([xyxy[inner], found[near]])
-            conf = np.concatenate([conf[inner], boxes.confidence[near]])
+            conf = np.concatenate([conf[inner], found_conf[near]])
         return Boxes(xyxy, conf), rotated
 
-    def _detect_tiles(self, small: NDArray[np.uint8], maps: list[FloatArray]) -> list[Boxes]:
-        """Each tile's boxes, in the order of ``maps`` (frame to tile): cut and detected in one go,
-        or each worker cutting and detecting its share of the tiles."""
-        if self._pool is None:
-            return self._cut_and_detect(small, maps)
-        done = [self._pool.submit(self._cut_and_detect, small, maps[k :: self.workers]) for k in range(self.workers)]
-        found = [f.result() for f in done]
-        return [found[i % self.workers][i // self.workers] for i in range(len(maps))]
+    def _centre_boxes(self, image_bgr: NDArray[np.uint8], small: NDArray[np.uint8], k_small: float, camera_height_m: float,
+                      focal_px: float, centre: tuple[float, float]) -> tuple[FloatArray, FloatArray]:  # fmt: skip
+        """The centre model's upright boxes in frame pixels and their scores, from the middle of
+        the frame only: a person kept there reaches at most a few tenths of the radius beyond
+        ``centre_share``. The halved frame serves where the centre model shrinks it further
+        anyway (rim tiles on cameras under about 8 m)."""
+        assert self.centre is not None
+        scale_for = getattr(self.centre, "scale_for", None)
+        if scale_for is not None and scale_for(camera_height_m, focal_px) > k_small:
+            small, k_small = image_bgr, 1.0
+        half = int(math.ceil((self.centre_share + CENTRE_MARGIN_SHARE) * focal_px * self.half_view * k_small))
+        cx, cy = int(centre[0] * k_small), int(centre[1] * k_small)
+        x0, y0 = max(0, cx - half), max(0, cy - half)
+        crop = np.ascontiguousarray(small[y0 : cy + half + 1, x0 : cx + half + 1])
+        boxes = self.centre.detect(crop, camera_height_m, focal_px * k_small)
+        return (boxes.xyxy + [x0, y0, x0, y0]) / k_small, boxes.confidence
 
-    def _cut_and_detect(self, small: NDArray[np.uint8], maps: list[FloatArray]) -> list[Boxes]:
+    def _run(self, job: Callable[..., T], *args: Any) -> Future[T]:
+        """``job(*args)`` on the workers, or here and now where there are none."""
+        if self._pool is not None:
+            return self._pool.submit(job, *args)
+        done: Future[T] = Future()
+        done.set_result(job(*args))
+        return done
+
+    def _detect_tiles(self, small: NDArray[np.uint8], maps: list[FloatArray]) -> list[Boxes]:
+        """Each tile's boxes, in the order of ``maps`` (frame to tile), each tile a job of its own
+        for the first free worker."""
+        return [job.result() for job in [self._run(self._cut_and_detect, small, m) for m in maps]]
+
+    def _cut_and_detect(self, small: NDArray[np.uint8], to_tile: FloatArray) -> Boxes:
+        # One tile a call: four FastestDet tiles in one call took 17 ms, one at a time 14.5 (the
+        # activations of a batch outgrow the cache).
         n = self.input_px
-        tiles = [np.asarray(cv2.warpAffine(small, m, (n, n), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT), dtype=np.uint8)
-                 for m in maps]  # fmt: skip
-        return self.tile_detector.detect_batch_scaled(tiles, [1.0] * len(tiles))
+        tile = cv2.warpAffine(small, to_tile, (n, n), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+        return self.tile_detector.detect_scaled(np.asarray(tile, dtype=np.uint8), 1.0)
 
     def tile_enlargement(self, radius: float) -> float:
         """How many times a frame's pixels are enlarged into the tiles, for an image circle of
@@ -234,11 +252,11 @@ CENTRE_MODEL = TILE_MODEL.with_name("bevflow-person-centernet.onnx")
 
 
 def rim_tiles(model: Callable[[Path, int], Detector], threads: int, tile_model: str | Path | None = None) -> RimTileDetector:
-    """The rim-tile detector with the shipped tile model (or ``tile_model``) on every tile, shared
-    among ``threads`` workers of one ONNX Runtime thread each, and the shipped general model on
-    ``threads`` threads for the people right under the camera; ``model(path, threads)`` loads
-    each (and may share what it loaded with other cameras)."""
-    return RimTileDetector(model(Path(tile_model or TILE_MODEL), 1), centre=model(CENTRE_MODEL, threads), workers=threads)
+    """The rim-tile detector with the shipped tile model (or ``tile_model``) on every tile and the
+    shipped general model for the people right under the camera, each a job for one of
+    ``threads`` workers of one ONNX Runtime thread; ``model(path, threads)`` loads each (and may
+    share what it loaded with other cameras)."""
+    return RimTileDetector(model(Path(tile_model or TILE_MODEL), 1), centre=model(CENTRE_MODEL, 1), workers=threads)
 
 
 def load_rim_tiles(threads: int = 2, tile_model: str | Path | None = None, **options: Unpack[DetectorOptions]) -> RimTileDetector:

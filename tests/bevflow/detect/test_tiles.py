@@ -42,9 +42,6 @@ class UprightBlobs:
         rows = [(x, y, x + w, y + h) for x, y, w, h, area in stats[1:count] if h > 1.3 * w and area > 4]
         return Boxes(np.array(rows, dtype=float).reshape(-1, 4), np.full(len(rows), 0.9))
 
-    def detect_batch_scaled(self, tiles: list[np.ndarray], scales: list[float]) -> list[Boxes]:
-        return [self.detect_scaled(t, s) for t, s in zip(tiles, scales, strict=True)]
-
 
 def _frame(people: list[list[float]]) -> np.ndarray:
     frame = np.zeros((440, 440, 3), np.uint8)
@@ -139,14 +136,14 @@ def test_the_shipped_tile_model_is_named() -> None:
         assert (TILE_MODEL.parent / f"LICENSE-{model}.txt").is_file() and f"{model}.onnx" in (ROOT / "NOTICE").read_text()
 
 
-@pytest.mark.parametrize("workers", [2, 3, 8])
-def test_tiles_shared_among_workers_find_what_one_call_finds(workers: int) -> None:
+@pytest.mark.parametrize("workers", [2, 3, 8, 9])
+def test_tiles_and_centre_shared_among_workers_find_what_one_worker_finds(workers: int) -> None:
     people = [_radial_person(d, r) for d, r in [(10.0, 90.0), (100.0, 130.0), (190.0, 70.0), (280.0, 150.0), (330.0, 120.0)]]
     one, shared = UprightBlobs(), UprightBlobs()
-    expected = RimTileDetector(one).detect_rotated(_frame(people), 3.0, FOCAL, CENTRE)
-    found = RimTileDetector(shared, workers=workers).detect_rotated(_frame(people), 3.0, FOCAL, CENTRE)
+    expected = RimTileDetector(one, centre=CentreBoxes()).detect_rotated(_frame(people), 3.0, FOCAL, CENTRE)  # type: ignore[arg-type]
+    found = RimTileDetector(shared, centre=CentreBoxes(), workers=workers).detect_rotated(_frame(people), 3.0, FOCAL, CENTRE)  # type: ignore[arg-type]
     assert shared.tiles == one.tiles == 8
-    assert np.array_equal(found[0], expected[0]) and np.array_equal(found[1], expected[1]) and len(found[0]) == 5
+    assert np.array_equal(found[0], expected[0]) and np.array_equal(found[1], expected[1]) and len(found[0]) == 6
 
 
 def test_workers_must_be_at_least_one() -> None:
