@@ -19,6 +19,8 @@ from typing import Any, TypeVar
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from bevflow.detect.decoders import SAME_PERSON_IOU, nms
+
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 # What selects rows of a column: one row, a slice, row numbers or a boolean mask.
@@ -103,6 +105,15 @@ class Boxes:
         return Boxes(
             xyxy=np.concatenate([p.xyxy for p in parts]), confidence=np.concatenate([p.confidence for p in parts])
         )
+
+    def distinct(self) -> Boxes:
+        """These boxes in their order, less each one overlapping a more confident one by more
+        than ``SAME_PERSON_IOU``: one person boxed twice, as a detector's own suppression leaves
+        them. Boxes from a detector that suppresses less (CMC2's, docs/RESULTS.md) would each put
+        a ghost beside their person for the tracker to follow or swap with a neighbour."""
+        if len(self) < 2:
+            return self
+        return self[np.sort(nms(self.xyxy, self.confidence, SAME_PERSON_IOU))]
 
     def corners(self) -> FloatArray:
         """(N, 4, 2): top-left, top-right, bottom-right, bottom-left."""

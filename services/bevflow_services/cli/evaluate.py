@@ -227,13 +227,13 @@ def format_table(results: list[DetectionEvaluation]) -> str:
         )
     for r in results:
         lines += ["", f"per camera ({r.method}; 'alone' = that camera's estimates vs the people it sees):",
-                  f"{'camera':<10} {'boxes':>6} {'dets':>6} {'drop':>5} {'trunc':>5} {'FP':>4} {'clip':>5} {'unpl':>5} {'out':>5} "
+                  f"{'camera':<10} {'boxes':>6} {'dets':>6} {'drop':>5} {'trunc':>5} {'FP':>4} {'clip':>5} {'dupl':>5} {'unpl':>5} {'out':>5} "
                   f"{'prec':>6} {'recall':>6} {'APE m':>6}"]
         for c in r.per_camera:
             a = c.alone
             lines.append(
                 f"{c.camera_id:<10} {c.boxes:>6} {c.detections:>6} {c.dropped:>5} {c.truncated:>5} {c.false_positives:>4} {c.clipped:>5} "
-                f"{c.unplaced:>5} {c.outside_area:>5} {_num(a.precision)} {_num(a.recall)} {_num(a.APE)}"
+                f"{c.duplicates:>5} {c.unplaced:>5} {c.outside_area:>5} {_num(a.precision)} {_num(a.recall)} {_num(a.APE)}"
             )
     return "\n".join(lines)
 

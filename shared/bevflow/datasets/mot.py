@@ -10,7 +10,9 @@ knows whose it is) and is not read, and columns past the confidence (MOTChalleng
 are ignored. Frame numbers are shared by every camera and the truth: frame f of one camera and
 frame f of another were taken at the same instant. Boxes are clipped to the camera's image, as a
 detector's are (MOTChallenge files may hold boxes reaching past the border), and a box left with
-no area is dropped.
+no area is dropped. Of two boxes of one camera and frame that overlap as one person's would, the
+less confident is left out when the boxes are read back (``CameraRecording.boxes``,
+``bevflow.detections.Boxes.distinct``), as bevflow's own detector suppresses them.
 
 Every problem in a file is a ``RecordingError`` naming the file and the line; a camera of the
 site with no file is one naming the camera.
@@ -48,9 +50,11 @@ class CameraRecording:
     by_frame: dict[int, Boxes]
 
     def boxes(self, frame: int, min_confidence: float = 0.0) -> Boxes:
-        """The boxes of ``frame`` whose confidence reaches ``min_confidence``."""
+        """The boxes of ``frame`` whose confidence reaches ``min_confidence``, in file order, less
+        each one overlapping a more confident one as one person's boxes would (``Boxes.distinct``)."""
         boxes = self.by_frame.get(frame) or Boxes.empty()
-        return boxes if min_confidence <= 0 else boxes[boxes.confidence >= min_confidence]
+        boxes = boxes if min_confidence <= 0 else boxes[boxes.confidence >= min_confidence]
+        return boxes.distinct()
 
 
 @dataclass(frozen=True)

@@ -34,6 +34,9 @@ FloatArray = NDArray[np.float64]
 FORMATS = ("centernet", "yolov5", "yolov8", "yolox", "fastestdet")
 CENTERNET_STRIDE = 4
 YOLOX_STRIDES = (8, 16, 32)
+# Two boxes of one frame overlapping more than this are one person boxed twice: the detector's own
+# suppression, and the projector's for boxes from any other detector (bevflow.live.projection).
+SAME_PERSON_IOU = 0.5
 
 
 def nms(xyxy: FloatArray, scores: FloatArray, iou_threshold: float) -> NDArray[np.int64]:

@@ -31,7 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bevflow.detect.cpu import int8_dot_product
-from bevflow.detect.decoders import FORMATS, decode_centernet, decode_fastestdet, decode_yolov5, decode_yolov8, decode_yolox, guess_format, nms
+from bevflow.detect.decoders import FORMATS, SAME_PERSON_IOU, decode_centernet, decode_fastestdet, decode_yolov5, decode_yolov8, decode_yolox, guess_format, nms
 from bevflow.detect.providers import DEFAULT_PROVIDERS, check_providers, plan_providers
 from bevflow.detect.rotated import radial_boxes
 from bevflow.detect.scaling import scale_factor
@@ -96,7 +96,7 @@ class Detector:
         model_path: str | Path | None = None,
         threads: int = 2,
         score_threshold: float = 0.4,
-        nms_iou: float = 0.5,
+        nms_iou: float = SAME_PERSON_IOU,
         model_format: str = "auto",
         person_class: int = 0,
         rgb: bool | None = None,

@@ -100,6 +100,7 @@ class CameraCounts:
     truncated: int
     false_positives: int
     clipped: int  # boxes cut by the image border (only with clip_to_image)
+    duplicates: int  # detections left out as another's of one person (Boxes.distinct), as a detector suppresses them
     unplaced: int  # detections the projection could not put on the floor
     weak: int  # placed, but weak (a cut box on a camera that cannot rebuild it): never a person alone
     outside_area: int  # placed, but outside the annotated area
@@ -114,9 +115,9 @@ class CameraCounts:
 
 def _camera_counts(camera_id: str, counts: NDArray[np.int64], alone: DetectionScores) -> CameraCounts:
     """``counts``: the CameraCounts fields from boxes to outside_area, in order."""
-    boxes, detections, dropped, truncated, false_positives, clipped, unplaced, weak, outside_area = counts.tolist()
+    boxes, detections, dropped, truncated, false_positives, clipped, duplicates, unplaced, weak, outside_area = counts.tolist()
     return CameraCounts(
-        camera_id, boxes, detections, dropped, truncated, false_positives, clipped, unplaced, weak, outside_area, alone
+        camera_id, boxes, detections, dropped, truncated, false_positives, clipped, duplicates, unplaced, weak, outside_area, alone
     )
 
 @dataclass(frozen=True)
@@ -246,14 +247,15 @@ def evaluate_detection(
     sightings: list[Cylinders] = []
     alone_gt: list[list[FloatArray]] = [[] for _ in cameras]
     alone_est: list[list[FloatArray]] = [[] for _ in cameras]
-    counts = np.zeros((n_cam, 9), dtype=np.int64)  # the CameraCounts fields from boxes to outside_area
+    counts = np.zeros((n_cam, 10), dtype=np.int64)  # the CameraCounts fields from boxes to outside_area
     for frame in selected:
         per_camera = []
         for i, (camera, view, noisy) in enumerate(zip(cameras, frame.views, noisy_detections(dataset, frame, noise, seed), strict=True)):
             clipped = 0
             if clip_to_image:
                 noisy, clipped = clip_boxes_to_image(noisy, camera.image_size)
-            cylinders = fit_cylinders(camera, noisy.boxes, method=method, grid=grid).with_camera(i)
+            boxes = noisy.boxes.distinct()
+            cylinders = fit_cylinders(camera, boxes, method=method, grid=grid).with_camera(i)
             placed: NDArray[np.bool_] = np.all(np.isfinite(cylinders.xy), axis=1)
             weak = placed & (cylinders.score <= 0)
             inside = dataset.area.contains(cylinders.xy)
@@ -264,6 +266,7 @@ def evaluate_detection(
                 int(noisy.truncated.sum()),
                 int((noisy.source < 0).sum()),
                 clipped,
+                len(noisy.boxes) - len(boxes),
                 int((~placed).sum()),
                 int(weak.sum()),
                 int((placed & ~inside).sum()),

@@ -7,8 +7,8 @@ have given (``BoxPerturbation``: each box dropped with a small probability, each
 few pixels) and reports each headline score's mean, lowest and highest over the copies. A gain
 that holds over the copies is not tied to the recording's own few decisions.
 
-On CMC2 (``docs/RESULTS.md``) the recording scores IDF1 0.537 while six copies with 5 % of the
-boxes dropped and 2 px of edge noise score 0.41–0.50.
+On CMC2 (``docs/RESULTS.md``) the recording scores IDF1 0.523 while six copies with 5 % of the
+boxes dropped and 2 px of edge noise score 0.41–0.54.
 """
 
 from __future__ import annotations

@@ -104,8 +104,8 @@ class TrackerConfig:
       next one along, a chain of swaps: with a person's detection missed one time in ten and
       exact positions otherwise, the CMC2 truth tracked with 66 identity switches by distance
       alone and 3 with this gate. It follows the frame rate by itself: the prediction's
-      covariance grows with the time since the last update. On real CMC2 boxes (with fusion's
-      track priors) MOTA 0.721 → 0.833, IDF1 0.344 → 0.537 (``docs/RESULTS.md``). On WILDTRACK
+      covariance grows with the time since the last update. On real CMC2 boxes, every box kept
+      (with fusion's track priors), MOTA 0.721 → 0.833, IDF1 0.344 → 0.537 (``docs/RESULTS.md``). On WILDTRACK
       at 2 fps it lost IDF1 (0.863 → 0.852), so ``WILDTRACK_TRACKER`` gates by distance alone.
     - ``lost_speed_mps``: after the gated passes, a confirmed track still without a detection may
       take a strong detection nobody took within this speed times the time since the last update

@@ -52,6 +52,19 @@ def test_boxes_are_clipped_to_the_image_as_a_detectors_are(tmp_path: Path, row: 
 
 
 @pytest.mark.parametrize(
+    ("second", "kept"),
+    [
+        ("0,4,20,40", [[0, 4, 20, 44]]),  # IoU 0.82: one person boxed twice, the more confident kept
+        ("0,0,20,20", [[0, 0, 20, 40], [0, 0, 20, 20]]),  # IoU 0.5 exactly: two people, in file order
+        ("10,0,20,40", [[0, 0, 20, 40], [10, 0, 30, 40]]),  # IoU 0.33: side by side
+    ],
+)
+def test_a_box_overlapping_a_more_confident_one_as_one_persons_would_is_left_out(tmp_path: Path, second: str, kept) -> None:
+    folder = write(tmp_path / "d", {"a.txt": f"1,-1,0,0,20,40,0.6\n1,-1,{second},0.9\n", "b.txt": ""})
+    np.testing.assert_array_equal(read_detections(folder, CAMERAS).cameras[0].boxes(1).xyxy, kept)
+
+
+@pytest.mark.parametrize(
     ("row", "message"),
     [
         ("1,-1,10,5,20", r"a\.txt:2: expected at least 7 comma-separated values, got 5"),

@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bevflow.datasets.wildtrack import FloorArea, WildtrackDataset, load_wildtrack
+from bevflow.datasets.wildtrack import FloorArea, ViewBoxes, WildtrackDataset, load_wildtrack
 from bevflow.detections import Boxes
 from bevflow.evaluation.detection import clip_boxes_to_image, evaluate_detection, noisy_detections, scored_estimates
 from bevflow.sim.noise import DetectorNoise, NoisyBoxes
@@ -32,9 +32,9 @@ def test_perfect_boxes_find_everyone_at_the_right_place(dataset: WildtrackDatase
     assert result.frame_numbers == (0, 5, 10) and result.method == method
     # two people are seen by both cameras, one by camera 0 only: 15 cylinders into 9 estimates
     assert result.views_per_estimate == pytest.approx(15 / 9)
-    assert [(c.camera_id, c.boxes, c.detections, c.dropped) for c in result.per_camera] == [
-        ("CVLab1", 9, 9, 0),
-        ("CVLab2", 6, 6, 0),
+    assert [(c.camera_id, c.boxes, c.detections, c.dropped, c.duplicates) for c in result.per_camera] == [
+        ("CVLab1", 9, 9, 0, 0),
+        ("CVLab2", 6, 6, 0, 0),
     ]
     assert [c.alone.tp for c in result.per_camera] == [9, 6]
 
@@ -81,6 +81,24 @@ def _without_person(dataset: WildtrackDataset, person: int) -> WildtrackDataset:
         for f in dataset.frames
     )
     return dataclasses.replace(dataset, frames=frames)
+
+
+def _boxed_twice(dataset: WildtrackDataset, camera: int) -> WildtrackDataset:
+    """The same, but ``camera`` boxing each person twice, the second box 2 px lower."""
+    def twice(view: ViewBoxes) -> ViewBoxes:
+        again = view.boxes.xyxy + [0, 2, 0, 2]
+        return ViewBoxes(Boxes(np.concatenate([view.boxes.xyxy, again])), np.concatenate([view.person_ids] * 2))
+    frames = tuple(
+        dataclasses.replace(f, views=tuple(twice(v) if i == camera else v for i, v in enumerate(f.views))) for f in dataset.frames
+    )
+    return dataclasses.replace(dataset, frames=frames)
+
+
+def test_a_person_boxed_twice_by_one_camera_is_placed_once(dataset: WildtrackDataset) -> None:
+    result = evaluate_detection(_boxed_twice(dataset, 0), noise=PERFECT)
+    assert (result.scores.tp, result.scores.fp, result.scores.fn) == (9, 0, 0)
+    assert [(c.detections, c.duplicates) for c in result.per_camera] == [(18, 9), (6, 0)]
+    assert result.views_per_estimate == pytest.approx(15 / 9)
 
 
 NARROW = FloorArea(-3.0, 2.5, -9.0, 27.0)  # ends 0.5 m before person 8 (x = 3.0 m)
