@@ -20,11 +20,18 @@ gets an id, so ids are never spent on false positives. Ids are unique for the li
 tracker (``reset()`` keeps counting) and ``first_id`` lets a restarted tracker continue after
 the last id it published. There is no global state: two trackers never share anything.
 
-Association cost is the Euclidean feet distance to the predicted position, as in the paper.
-Each pass is solved exactly by ``bevflow.metrics.matching.assign_edges``: only pairs within the
-gate are considered (found with a k-d tree), a pair with no rival is matched outright and the
-contested rest goes to one sparse assignment solve, minimising the total distance plus
-``gate`` for every track and detection left over. 1,000 people therefore cost about 3 ms per
+Association cost is the Euclidean feet distance to the predicted position, as in the paper;
+with the uncertainty gate (``gate_chi2``) it is the pair's negative log-likelihood instead,
+d² + ln |S| (d² the Mahalanobis distance² under S, the track's position covariance plus the
+detection's). Distance alone lets a vague detection (one view, 0.5 m deep along its line of
+sight) sit as near as a precise one and a coasting track's wide prediction claim a neighbour's;
+ln |S| prefers the precise pair. On CMC2's six perturbed copies (docs/RESULTS.md) IDF1 0.474 →
+0.530, HOTA 0.466 → 0.509 and MOTA 0.858 → 0.862; the Mahalanobis distance² alone lost (IDF1
+0.465). Each pass is solved exactly by ``bevflow.metrics.matching.assign_edges``: only pairs
+within the gate are considered (found with a k-d tree), a pair with no rival is matched outright
+and the contested rest goes to one sparse assignment solve, minimising the total cost plus the
+largest cost a gated pair could have (``gate``, or χ² plus the spread of ln |S|) for every track
+and detection left over. 1,000 people therefore cost about 3 ms per
 update rather than a dense 1,000 × 1,000 Hungarian solve.
 
 Reported tracks: ``update`` returns the confirmed tracks matched in this update, and those
@@ -104,9 +111,12 @@ class TrackerConfig:
       next one along, a chain of swaps: with a person's detection missed one time in ten and
       exact positions otherwise, the CMC2 truth tracked with 66 identity switches by distance
       alone and 3 with this gate. It follows the frame rate by itself: the prediction's
-      covariance grows with the time since the last update. On real CMC2 boxes, every box kept
-      (with fusion's track priors), MOTA 0.721 → 0.833, IDF1 0.344 → 0.537 (``docs/RESULTS.md``). On WILDTRACK
-      at 2 fps it lost IDF1 (0.863 → 0.852), so ``WILDTRACK_TRACKER`` gates by distance alone.
+      covariance grows with the time since the last update. With it, pairs are costed by their
+      likelihood instead of their distance (module docstring). On real CMC2 boxes, every box kept
+      and with distance costs (and fusion's track priors), MOTA 0.721 → 0.833, IDF1 0.344 →
+      0.537 (``docs/RESULTS.md``). On WILDTRACK at 2 fps it gains IDF1 and loses MOTA
+      (``bevflow.evaluation.wildtrack_tracking``), so ``WILDTRACK_TRACKER`` gates by distance
+      alone.
     - ``lost_speed_mps``: after the gated passes, a confirmed track still without a detection may
       take a strong detection nobody took within this speed times the time since the last update
       (at most ``gate_m``). ``gate_chi2`` shrinks with the filter's uncertainty, so where positions
@@ -239,6 +249,29 @@ class _Tracks:
         )
 
 
+@dataclass(frozen=True)
+class _Candidates:
+    """(track, detection) pairs one association pass may match, with their feet distance ``dist``
+    (each pass's gate). Under the uncertainty gate also each pair's Mahalanobis distance² ``d2``
+    and ln |S| of its innovation covariance (``log_det``), and that gate's χ² (``chi2``)."""
+
+    track: IntArray
+    det: IntArray
+    dist: FloatArray
+    d2: FloatArray | None = None
+    log_det: FloatArray | None = None
+    chi2: float = 0.0
+
+    def cost(self, allowed: BoolArray, gate: float) -> tuple[FloatArray, float]:
+        """The ``allowed`` pairs' costs and the worst cost a pair within the gate could have: the
+        feet distance and ``gate``, or the negative log-likelihood d² + ln |S| (less the least
+        ln |S|, so that no choice hangs on the unit of length) and χ² plus the spread of ln |S|."""
+        if self.d2 is None or self.log_det is None:
+            return self.dist[allowed], gate
+        log_det = self.log_det[allowed] - self.log_det[allowed].min()
+        return self.d2[allowed] + log_det, self.chi2 + float(log_det.max())
+
+
 class Tracker:
     """One online tracker for a whole site; see the module docstring."""
 
@@ -298,7 +331,7 @@ class Tracker:
         taken = np.zeros(len(cylinders), dtype=bool)
         # Every (track, detection) pair within the wider gate, found once for every pass.
         det_xy = np.where(usable[:, None], cylinders.xy, np.nan)
-        near = gated_pairs(tracks.state[:, :2], det_xy, max(cfg.gate_m, cfg.weak_gate_m))
+        near = _Candidates(*gated_pairs(tracks.state[:, :2], det_xy, max(cfg.gate_m, cfg.weak_gate_m)))
         pairs = near if cfg.gate_chi2 is None else self._within_innovation(near, cylinders, cfg.gate_chi2)
         passes = [
             (pairs, tracks.confirmed, strong, cfg.gate_m),
@@ -347,12 +380,11 @@ class Tracker:
         self._time_s = time_s
         return dt
 
-    def _within_innovation(
-        self, pairs: tuple[IntArray, IntArray, FloatArray], cylinders: Cylinders, chi2: float
-    ) -> tuple[IntArray, IntArray, FloatArray]:
+    def _within_innovation(self, pairs: _Candidates, cylinders: Cylinders, chi2: float) -> _Candidates:
         """The ``pairs`` whose detection lies within ``chi2`` of the track's predicted feet, under
-        the sum of the track's position covariance and the detection's (``gate_chi2``)."""
-        track, det, dist = pairs
+        the sum S of the track's position covariance and the detection's (``gate_chi2``), with
+        their Mahalanobis distance² and ln |S| to cost them by."""
+        track, det = pairs.track, pairs.det
         tracks = self._tracks
         measurement = self._measurement_covariance(cylinders, det)
         if measurement is None:
@@ -360,21 +392,20 @@ class Tracker:
         joint = tracks.covariance[track, :2, :2] + measurement
         offset = cylinders.xy[det] - tracks.state[track, :2]
         d2 = np.einsum("ni,nij,nj->n", offset, np.linalg.inv(joint), offset) if len(det) else np.zeros(0)
+        log_det = np.log(np.linalg.det(joint)) if len(det) else np.zeros(0)
         keep = d2 < chi2
-        return track[keep], det[keep], dist[keep]
+        return _Candidates(track[keep], det[keep], pairs.dist[keep], d2[keep], log_det[keep], chi2)
 
-    def _associate(
-        self, pairs: tuple[IntArray, IntArray, FloatArray], track_ok: BoolArray, det_ok: BoolArray, gate: float
-    ) -> None:
-        """Match candidate tracks to candidate detections among ``pairs`` (track, detection,
-        distance) within ``gate``; writes ``detection`` of the matched tracks."""
-        track, det, dist = pairs
-        allowed = track_ok[track] & det_ok[det] & (dist <= gate)
+    def _associate(self, pairs: _Candidates, track_ok: BoolArray, det_ok: BoolArray, gate: float) -> None:
+        """Match candidate tracks to candidate detections among ``pairs`` within ``gate`` (feet
+        distance); writes ``detection`` of the matched tracks."""
+        allowed = track_ok[pairs.track] & det_ok[pairs.det] & (pairs.dist <= gate)
         if not allowed.any():
             return
-        # A track or detection left over costs the gate: any pair within it is worth making.
+        cost, worst = pairs.cost(allowed, gate)
+        # A track or detection left over costs the worst a gated pair could: any pair is worth making.
         r, c = assign_edges(
-            track[allowed], det[allowed], dist[allowed], len(track_ok), len(det_ok), unmatched_cost=gate
+            pairs.track[allowed], pairs.det[allowed], cost, len(track_ok), len(det_ok), unmatched_cost=worst
         )
         self._tracks.detection[r] = c
 

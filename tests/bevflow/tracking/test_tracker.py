@@ -389,6 +389,25 @@ def test_a_track_whose_person_was_missed_does_not_take_a_neighbours_detection(ga
     assert last.id[last.detection == 0].tolist() == [id_at_b]
 
 
+@pytest.mark.parametrize(
+    ("gate_chi2", "taken"),
+    [(9.21, 1), (None, 0)],
+    ids=["costed by likelihood", "costed by distance"],
+)
+def test_a_vague_view_beside_a_person_does_not_take_their_track(gate_chi2, taken) -> None:
+    """A person seen precisely (σ 0.05 m) stands at the origin. Then two detections: theirs,
+    0.12 m off and as precise, and 0.08 m off a ghost: one camera's second box of them, 0.3 m
+    deep along that camera's line of sight (y). By distance the ghost is nearer; by likelihood
+    it is the less likely, having no business to be that near while that vague."""
+    tracker = Tracker(TrackerConfig(activate_hits=1, gate_chi2=gate_chi2))
+    seen = Cylinders(xy=[[0.0, 0.0]], covariance=[0.05**2 * np.eye(2)])
+    for k in range(10):
+        tracker.update(seen, k * 0.25)
+    ghost_and_person = Cylinders(xy=[[0.0, 0.08], [0.12, 0.0]], covariance=[np.diag([0.1**2, 0.3**2]), 0.05**2 * np.eye(2)])
+    last = tracker.update(ghost_and_person, 2.5)
+    assert last.detection[last.id == 1].tolist() == [taken]
+
+
 def test_predicted_positions_are_where_the_tracks_will_be_without_moving_them() -> None:
     tracker = Tracker(TrackerConfig(activate_hits=2))
     for k in range(10):
