@@ -23,16 +23,16 @@ the last id it published. There is no global state: two trackers never share any
 Association cost is the Euclidean feet distance to the predicted position, as in the paper;
 with the uncertainty gate (``gate_chi2``) it is the pair's negative log-likelihood instead,
 d² + ln |S| (d² the Mahalanobis distance² under S, the track's position covariance plus the
-detection's). Distance alone lets a vague detection (one view, 0.5 m deep along its line of
-sight) sit as near as a precise one and a coasting track's wide prediction claim a neighbour's;
-ln |S| prefers the precise pair. On CMC2's six perturbed copies (docs/RESULTS.md) IDF1 0.474 →
-0.530, HOTA 0.466 → 0.509 and MOTA 0.858 → 0.862; the Mahalanobis distance² alone lost (IDF1
-0.465). Each pass is solved exactly by ``bevflow.metrics.matching.assign_edges``: only pairs
-within the gate are considered (found with a k-d tree), a pair with no rival is matched outright
-and the contested rest goes to one sparse assignment solve, minimising the total cost plus the
-largest cost a gated pair could have (``gate``, or χ² plus the spread of ln |S|) for every track
-and detection left over. 1,000 people therefore cost about 3 ms per
-update rather than a dense 1,000 × 1,000 Hungarian solve.
+detection's). By distance alone a vague detection beside a person (one camera's second box of
+them, placed 0.5 m deep along its line of sight) takes their track from their own precise one by
+lying nearer; ln |S| prefers the precise pair. On CMC2's six perturbed copies (docs/RESULTS.md)
+IDF1 0.474 → 0.529, HOTA 0.466 → 0.509 and MOTA 0.858 → 0.862; the Mahalanobis distance² alone
+lost (IDF1 0.465). Each pass is solved exactly by ``bevflow.metrics.matching.assign_edges``: only
+pairs within the gate are considered (found with a k-d tree), a pair with no rival is matched
+outright and the contested rest goes to one sparse assignment solve, minimising the total cost
+plus the largest cost a gated pair could have (``gate``, or χ² plus the spread of ln |S|) for
+every track and detection left over. 1,000 people therefore cost about 3 ms per update rather
+than a dense 1,000 × 1,000 Hungarian solve.
 
 Reported tracks: ``update`` returns the confirmed tracks matched in this update, and those
 coasting (missed) for at most ``report_max_misses`` consecutive updates, at their predicted
