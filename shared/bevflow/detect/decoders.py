@@ -35,7 +35,7 @@ FORMATS = ("centernet", "yolov5", "yolov8", "yolox", "fastestdet")
 CENTERNET_STRIDE = 4
 YOLOX_STRIDES = (8, 16, 32)
 # Two boxes of one frame overlapping more than this are one person boxed twice: the detector's own
-# suppression, and the projector's for boxes from any other detector (bevflow.live.projection).
+# suppression, and that of boxes another detector recorded (bevflow.detections.Boxes.distinct).
 SAME_PERSON_IOU = 0.5
 
 
