@@ -3,8 +3,8 @@
 ONNX Runtime's integer convolutions are fast on CPUs with 8-bit dot-product instructions (x86
 VNNI or AMX, Arm's dot product and matrix-multiply extensions); without them an INT8 model is
 slower than its float original. Measured with ``bevflow bench`` (``detector_int8_speedup_5_5m_
-2_threads``, the general model at 5.5 m on 2 threads): 1.93 on an AMD EPYC with AVX-512 VNNI,
-0.88–0.89 on one with AVX2 only (docs/BENCHMARKS.md).
+2_threads``, the general model at 5.5 m on 2 threads): 1.91–1.93 on an AMD EPYC with AVX-512
+VNNI (docs/BENCHMARKS.md), 0.88–0.89 on one with AVX2 only (25.5 against 22.6 ms).
 
 >>> int8_dot_product("flags\\t\\t: fpu sse2 avx2 avx512f avx512_vnni")
 True

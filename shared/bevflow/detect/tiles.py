@@ -51,8 +51,9 @@ share, and eight tiles took 32 ms on two threads against 46 ms on one. So each t
 centre model's crop, is a job of its own for the first free of ``workers`` workers of one thread
 each, one tile a call (four tiles in one call took 17 ms, one at a time 14.5: a batch's
 activations outgrow the cache), the centre model's job first so that it runs beside the tiles.
-On a 2048 px frame on 2 cores that took 29–31 ms where two workers with four tiles each and the
-centre model after them took 32–34 in the same runs (docs/BENCHMARKS.md).
+On a 2048 px frame on a 2-core Intel Xeon that took 29–31 ms where two workers with four tiles
+each and the centre model after them took 32–34 in the same runs (docs/BENCHMARKS.md has today's
+figures).
 """
 
 from __future__ import annotations
