@@ -110,6 +110,7 @@ from scipy.spatial import cKDTree
 
 from bevflow.camera import Camera
 from bevflow.detections import Cylinders
+from bevflow import matrix2
 from bevflow.metrics.matching import assign_edges, gated_pairs
 
 FloatArray = NDArray[np.float64]
@@ -183,7 +184,7 @@ def fuse_cylinders(
         labels = _group(rows.xy, rows.camera, None, distance_m, gate_chi2, max_gate_m)
     else:
         covariance = _carried_or_computed_covariance(rows, cameras, noise)
-        info = _inverse_2x2(covariance)
+        info = matrix2.inverse(covariance)
         if priors is not None and len(priors):
             labels, on_prior = _group_with_priors(rows, covariance, priors, distance_m, gate_chi2, max_gate_m)
         else:
@@ -237,7 +238,7 @@ def _hidden_behind(
         along = (fused.xy[behind] - centres[k, :2]) @ sight
         offset = fused.xy[behind] - fused.xy[s]
         covariance = covariance_of[behind] + covariance_of[s] + along_m**2 * np.outer(sight, sight)
-        d2 = np.einsum("ni,nij,nj->n", offset, _inverse_2x2(covariance), offset)
+        d2 = np.einsum("ni,nij,nj->n", offset, matrix2.inverse(covariance), offset)
         hides = (along > 0) & (along < run[k]) & (d2 < gate_chi2)
         if hides.any():
             into[s] = behind[hides][np.argmin(d2[hides])]
@@ -301,7 +302,7 @@ def position_covariance(
 
     pixel_sigma = noise.box_fraction * (uv[:, :8].max(axis=1) - uv[:, :8].min(axis=1))
     jacobian = np.stack([uv[:, 9] - uv[:, 8], uv[:, 10] - uv[:, 8]], axis=2) / _PROBE_M  # d(u, v) / d(x, y)
-    to_floor = _inverse_2x2(jacobian)
+    to_floor = matrix2.inverse(jacobian)
     pixel_covariance = np.zeros((n, 2, 2))
     pixel_covariance[:, 0, 0], pixel_covariance[:, 1, 1] = pixel_sigma[:, 0] ** 2, pixel_sigma[:, 1] ** 2
     covariance = to_floor @ pixel_covariance @ to_floor.transpose(0, 2, 1)
@@ -364,14 +365,6 @@ def _check_cameras(cylinders: Cylinders, cameras: Sequence[Camera]) -> None:
         )
 
 
-def _inverse_2x2(m: FloatArray) -> FloatArray:
-    """Inverses of (N, 2, 2) matrices; non-finite where a matrix is singular or not finite."""
-    a, b, c, d = m[:, 0, 0], m[:, 0, 1], m[:, 1, 0], m[:, 1, 1]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        det = a * d - b * c
-        return np.stack([np.stack([d, -b], axis=1), np.stack([-c, a], axis=1)], axis=1) / det[:, None, None]
-
-
 def _largest_eigenvalue(m: FloatArray) -> FloatArray:
     """The larger eigenvalue of each symmetric (N, 2, 2) matrix (its lower triangle read)."""
     a, b, d = m[:, 0, 0], m[:, 1, 0], m[:, 1, 1]
@@ -413,7 +406,7 @@ def _group(
     depth = (gap / distance_m) ** 2  # how deep inside its gate a pair lies: < 1 is inside
     if covariance is not None:
         with np.errstate(invalid="ignore"):
-            d2 = np.einsum("ni,nij,nj->n", diff, _inverse_2x2(covariance[a] + covariance[b]), diff)
+            d2 = np.einsum("ni,nij,nj->n", diff, matrix2.inverse(covariance[a] + covariance[b]), diff)
         d2 = np.where(np.isfinite(d2) & (gap < max_gate_m), d2, np.inf)
         depth = np.minimum(depth, d2 / gate_chi2)
     usable = (camera[a] != camera[b]) & (depth < 1.0)
@@ -491,7 +484,7 @@ def _views_on_priors(
         return prior_of
     prior_covariance = priors.covariance if priors.covariance is not None else np.zeros((len(priors), 2, 2))
     offset = rows.xy[view] - priors.xy[prior]
-    d2 = np.einsum("ni,nij,nj->n", offset, _inverse_2x2(covariance[view] + prior_covariance[prior]), offset)
+    d2 = np.einsum("ni,nij,nj->n", offset, matrix2.inverse(covariance[view] + prior_covariance[prior]), offset)
     within = d2 < gate_chi2
     view, prior, d2 = view[within], prior[within], d2[within]
     # One solve for all cameras: a (camera, prior) pair per column keeps each camera's choice its own.
@@ -586,6 +579,6 @@ def _merge(
         camera=camera,
         score=score,
         occluded=~visible,
-        covariance=_inverse_2x2(total_info) if with_covariance else None,
+        covariance=matrix2.inverse(total_info) if with_covariance else None,
     )
     return fused, n_views

@@ -32,6 +32,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from bevflow.matrix2 import inverse
+
 FloatArray = NDArray[np.float64]
 
 
@@ -106,20 +108,12 @@ class ConstantVelocityKalman:
             s = covariance[:, :2, :2].copy()
             s[:, 0, 0] += r
             s[:, 1, 1] += r
-        gain = covariance[:, :, :2] @ _inverse_2x2(s)  # (N, 4, 2)
+        gain = covariance[:, :, :2] @ inverse(s)  # (N, 4, 2)
         state = state + np.einsum("nij,nj->ni", gain, innovation)
         # P - K H P, symmetrised so rounding never lets it drift from symmetric.
         covariance = covariance - gain @ covariance[:, :2, :]
         covariance = 0.5 * (covariance + covariance.transpose(0, 2, 1))
         return state, covariance
-
-
-def _inverse_2x2(m: FloatArray) -> FloatArray:
-    a, b, c, d = m[:, 0, 0], m[:, 0, 1], m[:, 1, 0], m[:, 1, 1]
-    det = a * d - b * c
-    inv = np.empty_like(m)
-    inv[:, 0, 0], inv[:, 0, 1], inv[:, 1, 0], inv[:, 1, 1] = d / det, -b / det, -c / det, a / det
-    return inv
 
 
 def smooth(previous: FloatArray, measured: FloatArray, weight: float) -> FloatArray:

@@ -65,6 +65,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bevflow.detections import Cylinders
+from bevflow.matrix2 import determinant, inverse
 from bevflow.metrics.matching import assign_edges, gated_pairs
 from bevflow.tracking.kalman import ConstantVelocityKalman, smooth
 
@@ -390,11 +391,9 @@ class Tracker:
         if measurement is None:
             measurement = np.broadcast_to(self.config.measurement_std_m**2 * np.eye(2), (len(det), 2, 2))
         joint = tracks.covariance[track, :2, :2] + measurement
-        dx, dy = (cylinders.xy[det] - tracks.state[track, :2]).T
-        sxx, sxy, syy = joint[:, 0, 0], joint[:, 0, 1], joint[:, 1, 1]
-        det_s = sxx * syy - sxy * sxy  # 2 x 2 by hand: numpy's batched inverse costs more than the rest
-        d2 = (syy * dx * dx - 2 * sxy * dx * dy + sxx * dy * dy) / det_s
-        log_det = np.log(det_s)
+        offset = cylinders.xy[det] - tracks.state[track, :2]
+        d2 = np.einsum("ni,nij,nj->n", offset, inverse(joint), offset)
+        log_det = np.log(determinant(joint))
         keep = d2 < chi2
         return _Candidates(track[keep], det[keep], pairs.dist[keep], d2[keep], log_det[keep], chi2)
 
