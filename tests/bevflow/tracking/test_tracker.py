@@ -397,8 +397,9 @@ def test_a_track_whose_person_was_missed_does_not_take_a_neighbours_detection(ga
 def test_a_vague_view_beside_a_person_does_not_take_their_track(gate_chi2, taken) -> None:
     """A person seen precisely (σ 0.05 m) stands at the origin. Then two detections: theirs,
     0.12 m off and as precise, and 0.08 m off a ghost: one camera's second box of them, 0.3 m
-    deep along that camera's line of sight (y). By distance the ghost is nearer; by likelihood
-    it is the less likely, having no business to be that near while that vague."""
+    deep along that camera's line of sight (y). By distance the ghost is nearer; by likelihood the
+    person's own detection wins: a vague detection is about as likely anywhere in its wide
+    ellipse, so lying near the prediction earns it little."""
     tracker = Tracker(TrackerConfig(activate_hits=1, gate_chi2=gate_chi2))
     seen = Cylinders(xy=[[0.0, 0.0]], covariance=[0.05**2 * np.eye(2)])
     for k in range(10):
