@@ -95,9 +95,9 @@ def run(args: argparse.Namespace) -> int:
     if args.images is not None:
         return run_detector_evaluation(args)
     if args.detections is not None:
-        replayed, perturbed = run_replay(args)
+        replayed, extra = run_replay(args)
         if args.json is not None:
-            _write_json(args.json, replayed.as_dict() | ({} if perturbed is None else {"perturbed": perturbed.as_dict()}))
+            _write_json(args.json, replayed.as_dict() | extra)
         return 0
     methods = list(METHODS) if args.method == "all" else [args.method]
     if args.suite is not None:

@@ -6,7 +6,8 @@ Prints and writes (``--json OUT``) ``MODA``, ``MOTA``, ``IDF1``, ``HOTA``, ``Det
 then ``detection_MODA`` (each frame's fused cylinders before tracking) and every score of the
 online, settled and fused output under ``tracked``, ``settled`` and ``detection``. With
 ``--perturb N``, also each headline score's mean, min and max over N perturbed copies of the
-recording (``bevflow.evaluation.perturbed``) under ``perturbed``.
+recording (``bevflow.evaluation.perturbed``) under ``perturbed``. With ``--ideal-noise M``, also
+the tracker alone on the truth moved by M metres (``bevflow.evaluation.ideal``) under ``ideal``.
 """
 
 from __future__ import annotations
@@ -14,13 +15,16 @@ from __future__ import annotations
 import argparse
 import math
 from pathlib import Path
+from typing import Any
 
 from bevflow.datasets.mot import MIN_CONFIDENCE, RecordingError, read_detections, read_truth
 from bevflow.datasets.wildtrack import FloorArea
-from bevflow.evaluation.perturbed import SCORED, BoxPerturbation, PerturbedReplays, perturbed_replays
-from bevflow.evaluation.replay import Everywhere, ReplayEvaluation, replay_tracking
+from bevflow.evaluation.ideal import ideal_tracking
+from bevflow.evaluation.perturbed import BoxPerturbation, PerturbedReplays, perturbed_replays
+from bevflow.evaluation.replay import SCORED, Everywhere, ReplayEvaluation, replay_tracking
 from bevflow.site import Site, SiteError, load_site_or_builtin
-from bevflow.tracking.tracker import TrackTable
+from bevflow.evaluation.spread import Spread
+from bevflow.tracking.tracker import TrackerConfig, TrackTable
 
 from bevflow_services.runtime import UserError
 
@@ -51,11 +55,15 @@ def add_replay_arguments(parser: argparse.ArgumentParser) -> None:
                        help=f"in each copy, drop each box with probability P (default {perturbation.drop:g})")
     group.add_argument("--perturb-jitter", type=float, default=perturbation.jitter_px, metavar="PX",
                        help=f"in each copy, move each box edge by a normal error of PX pixels (default {perturbation.jitter_px:g})")
+    group.add_argument("--ideal-noise", type=float, metavar="M",
+                       help="also track the truth itself, each position moved by a normal error of M metres, with no "
+                       "detector or fusion: what the tracker alone loses on this scene (over the --perturb N seeds, else one)")
 
 
-def run_replay(args: argparse.Namespace) -> tuple[ReplayEvaluation, PerturbedReplays | None]:
-    """Check the options, replay (and the ``--perturb`` copies), print the scores and write
-    ``--tracks-out``; the caller writes ``--json``."""
+def run_replay(args: argparse.Namespace) -> tuple[ReplayEvaluation, dict[str, Any]]:
+    """Check the options, replay (and the ``--perturb`` copies and ``--ideal-noise`` runs), print
+    the scores and write ``--tracks-out``; returns the replay and the JSON of the extra runs
+    (``perturbed``, ``ideal``), which the caller writes to ``--json``."""
     for option in ("site", "truth", "fps"):
         if getattr(args, option) is None:
             raise UserError(f"--detections needs --{option} (see bevflow evaluate --help)")
@@ -64,6 +72,8 @@ def run_replay(args: argparse.Namespace) -> tuple[ReplayEvaluation, PerturbedRep
     if not (math.isfinite(args.min_confidence) and args.min_confidence >= 0):
         raise UserError(f"--min-confidence must be a number >= 0, got {args.min_confidence}")
     perturbation = _perturbation(args)
+    if args.ideal_noise is not None and not (math.isfinite(args.ideal_noise) and args.ideal_noise >= 0):
+        raise UserError(f"--ideal-noise must be a number of metres >= 0, got {args.ideal_noise}")
     try:
         site = load_site_or_builtin(args.site)
     except SiteError as exc:
@@ -80,11 +90,17 @@ def run_replay(args: argparse.Namespace) -> tuple[ReplayEvaluation, PerturbedRep
     print(format_replay(result, site))
     if args.tracks_out is not None:
         write_tracks(args.tracks_out, result.tracks)
-    if not args.perturb:
-        return result, None
-    spread = perturbed_replays(site, recording, truth, args.fps, args.perturb, perturbation, area, args.min_confidence)
-    print(format_spread(spread))
-    return result, spread
+    extra: dict[str, Any] = {}
+    if args.perturb:
+        spread = perturbed_replays(site, recording, truth, args.fps, args.perturb, perturbation, area, args.min_confidence)
+        print(format_spread(spread))
+        extra["perturbed"] = spread.as_dict()
+    if args.ideal_noise is not None:
+        runs = max(1, args.perturb)
+        ideal = ideal_tracking(truth, args.fps, args.ideal_noise, TrackerConfig.from_thresholds(site.thresholds), runs, area)
+        print(format_spread_rows(f"the truth moved by {args.ideal_noise:g} m (σ), tracked alone, {runs} seed(s):", ideal))
+        extra["ideal"] = {"noise_m": args.ideal_noise, "runs": runs, **{k: s.as_dict() for k, s in ideal.items()}}
+    return result, extra
 
 
 def _perturbation(args: argparse.Namespace) -> BoxPerturbation:
@@ -143,11 +159,16 @@ _SHORT = {"precision": "prec", "APE": "APE m"}  # the column heads of format_rep
 
 def format_spread(p: PerturbedReplays) -> str:
     """Each headline score's mean, min and max over the perturbed copies, one row each."""
-    rows = [f"{p.runs} perturbed copies (each box dropped with probability {p.perturbation.drop:g}, each edge moved "
-            f"{p.perturbation.jitter_px:g} px σ), online tracks:",
-            f"{'':<9}" + "".join(f" {_SHORT.get(k, k):>6}" for k in SCORED)]
+    title = (f"{p.runs} perturbed copies (each box dropped with probability {p.perturbation.drop:g}, each edge moved "
+             f"{p.perturbation.jitter_px:g} px σ), online tracks:")
+    return format_spread_rows(title, p.scores)
+
+
+def format_spread_rows(title: str, scores: dict[str, Spread]) -> str:
+    """``title``, then each headline score's mean, min and max over several runs, one row each."""
+    rows = [title, f"{'':<9}" + "".join(f" {_SHORT.get(k, k):>6}" for k in SCORED)]
     for name, field in (("mean", "mean"), ("min", "low"), ("max", "high")):
-        values = [getattr(p.scores[k], field) for k in SCORED]
+        values = [getattr(scores[k], field) for k in SCORED]
         rows.append(f"{name:<9}" + "".join(f" {v:>6.1f}" if k == "IDSW" else f" {_num(v)}" for k, v in zip(SCORED, values, strict=True)))
     return "\n".join(rows)
 

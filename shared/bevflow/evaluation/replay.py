@@ -46,6 +46,7 @@ IntArray = NDArray[np.int64]
 Frame = tuple[IntArray, FloatArray]
 
 HEADLINE = ("MODA", "MOTA", "IDF1", "HOTA", "DetA", "AssA", "IDSW", "precision", "recall", "APE", "frames")
+SCORED = tuple(k for k in HEADLINE if k != "frames")  # the headline's scores (frames is a count)
 
 
 @dataclass(frozen=True)
@@ -54,6 +55,15 @@ class Everywhere:
 
     def contains(self, xy: FloatArray) -> NDArray[np.bool_]:
         return np.ones(len(xy), dtype=bool)
+
+
+EVERYWHERE = Everywhere()
+
+
+def headline(s: TrackingScores, h: HotaScores) -> dict[str, float]:
+    """``HEADLINE`` from one run's tracking and HOTA scores."""
+    return {"MODA": s.MODA, "MOTA": s.MOTA, "IDF1": s.IDF1, "HOTA": h.HOTA, "DetA": h.DetA, "AssA": h.AssA,
+            "IDSW": s.IDSW, "precision": s.precision, "recall": s.recall, "APE": s.APE, "frames": s.frames}
 
 
 @dataclass(frozen=True)
@@ -73,9 +83,7 @@ class ReplayEvaluation:
 
     def headline(self) -> dict[str, float]:
         """``HEADLINE``: the online tracks' scores (MODA is theirs too)."""
-        s, h = self.scores, self.hota
-        return {"MODA": s.MODA, "MOTA": s.MOTA, "IDF1": s.IDF1, "HOTA": h.HOTA, "DetA": h.DetA, "AssA": h.AssA,
-                "IDSW": s.IDSW, "precision": s.precision, "recall": s.recall, "APE": s.APE, "frames": s.frames}
+        return headline(self.scores, self.hota)
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready: ``HEADLINE`` as top-level keys, then every score of the online tracks under
@@ -102,7 +110,7 @@ def replay_tracking(
     recording: DetectionRecording,
     truth: WorldTruth,
     fps: float,
-    area: Area = Everywhere(),
+    area: Area = EVERYWHERE,
     min_confidence: float = 0.0,
     tracker: TrackerConfig | None = None,
     threshold_m: float = 0.5,

@@ -53,6 +53,21 @@ def test_perturbed_copies_print_and_write_the_spread_of_each_score(recording: Pa
     assert "perturbed" not in json.loads(out.read_text()) and "perturbed copies" not in capsys.readouterr().out
 
 
+def test_ideal_runs_track_the_truth_alone_and_write_their_spread(recording: Path, capsys: pytest.CaptureFixture) -> None:
+    out = recording / "scores.json"
+    assert main(args(recording, "--ideal-noise", "0.05", "--perturb", "2", "--json", str(out))) == 0
+    result = json.loads(out.read_text())
+    ideal = result["ideal"]
+    assert (ideal["noise_m"], ideal["runs"]) == (0.05, 2)
+    assert set(HEADLINE) - {"frames"} <= ideal.keys()
+    assert ideal["precision"]["min"] == 1.0  # the truth alone: nobody else to find
+    printed = capsys.readouterr().out
+    assert "the truth moved by 0.05 m (σ), tracked alone, 2 seed(s):" in printed
+    # none asked for: no key written
+    assert main(args(recording, "--json", str(out))) == 0
+    assert "ideal" not in json.loads(out.read_text()) and "tracked alone" not in capsys.readouterr().out
+
+
 def test_the_area_leaves_out_unmatched_tracks_beyond_it(recording: Path, tmp_path: Path) -> None:
     # the walkers stand at y = -2, 0, 2 m: an area around the first one scores only them
     out = tmp_path / "area.json"
@@ -71,6 +86,7 @@ def test_the_area_leaves_out_unmatched_tracks_beyond_it(recording: Path, tmp_pat
         (None, ("--perturb", "-1"), "--perturb must be a number of copies >= 0"),
         (None, ("--perturb", "2", "--perturb-drop", "1"), "--perturb-drop, --perturb-jitter: drop must be a probability in [0, 1)"),
         (None, ("--perturb", "2", "--perturb-jitter", "nan"), "--perturb-drop, --perturb-jitter: jitter_px must be a number of pixels >= 0"),
+        (None, ("--ideal-noise", "-0.1"), "--ideal-noise must be a number of metres >= 0"),
         ("missing camera", (), "CVLab2.txt: no detections file for camera 'CVLab2'"),
         ("bad row", (), "CVLab1.txt:3: 'wide' is not a number"),
         ("bad truth", (), "truth.txt:1: expected at least 4"),
