@@ -22,8 +22,8 @@ from bevflow.datasets.wildtrack import FloorArea
 from bevflow.evaluation.ideal import ideal_tracking
 from bevflow.evaluation.perturbed import BoxPerturbation, PerturbedReplays, perturbed_replays
 from bevflow.evaluation.replay import SCORED, Everywhere, ReplayEvaluation, replay_tracking
-from bevflow.site import Site, SiteError, load_site_or_builtin
 from bevflow.evaluation.spread import Spread
+from bevflow.site import Site, SiteError, load_site_or_builtin
 from bevflow.tracking.tracker import TrackerConfig, TrackTable
 
 from bevflow_services.runtime import UserError

@@ -44,9 +44,9 @@ def ideal_tracking(
     area: Area = EVERYWHERE,
     threshold_m: float = 0.5,
 ) -> dict[str, Spread]:
-    """The headline scores (``SCORED``) of ``runs`` ideal replays of
-    ``truth`` (seeds 0 .. runs − 1), each position moved by ``noise_m`` (σ, metres, per axis);
-    frame f is at f / ``fps`` seconds, as in a replay."""
+    """The headline scores (``SCORED``) of ``runs`` ideal replays of ``truth`` (seeds 0 .. runs − 1),
+    each position moved by ``noise_m`` (σ, metres, per axis); frame f is at f / ``fps`` seconds,
+    as in a replay."""
     if not fps > 0:
         raise ValueError(f"fps must be > 0, got {fps}")
     if not (math.isfinite(noise_m) and noise_m >= 0):
