@@ -24,7 +24,7 @@ from bevflow.evaluation.perturbed import BoxPerturbation, PerturbedReplays, pert
 from bevflow.evaluation.replay import SCORED, Everywhere, ReplayEvaluation, replay_tracking
 from bevflow.evaluation.spread import Spread
 from bevflow.site import Site, SiteError, load_site_or_builtin
-from bevflow.tracking.tracker import TrackerConfig, TrackTable
+from bevflow.tracking.tracker import TrackTable
 
 from bevflow_services.runtime import UserError
 
@@ -97,7 +97,7 @@ def run_replay(args: argparse.Namespace) -> tuple[ReplayEvaluation, dict[str, An
         extra["perturbed"] = spread.as_dict()
     if args.ideal_noise is not None:
         runs = max(1, args.perturb)
-        ideal = ideal_tracking(truth, args.fps, args.ideal_noise, TrackerConfig.from_thresholds(site.thresholds), runs, area)
+        ideal = ideal_tracking(truth, args.fps, args.ideal_noise, result.tracker, runs, area)  # the replay's own settings
         print(format_spread_rows(f"the truth moved by {args.ideal_noise:g} m (σ), tracked alone, {runs} seed(s):", ideal))
         extra["ideal"] = {"noise_m": args.ideal_noise, "runs": runs, **{k: s.as_dict() for k, s in ideal.items()}}
     return result, extra

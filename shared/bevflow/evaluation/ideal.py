@@ -4,8 +4,9 @@
 moved by a normal error of ``noise_m`` per axis (each point carrying that error as its
 covariance), and nothing else: no misses, no false or duplicate points, no fusion. What it loses
 is lost to association over time alone, so beside a replay's own figures it tells whether a
-detector, fusion or the tracker holds a scene back. The site's tracker settings are used, as in
-``bevflow.evaluation.replay``, and the scores are that module's headline.
+detector, fusion or the tracker holds a scene back. ``bevflow evaluate --ideal-noise`` passes the
+replay's own tracker settings (the site's), and the scores are ``bevflow.evaluation.replay``'s
+headline.
 
 On CMC2 (``docs/RESULTS.md``), where the replay's tracks lie 0.13 m from the truth on average, the
 tracker given the truth exactly or with 0.05 / 0.10 / 0.15 m of noise scores IDF1 0.91 / 0.86 /
