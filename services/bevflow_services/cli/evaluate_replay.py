@@ -86,7 +86,10 @@ def run_replay(args: argparse.Namespace) -> tuple[ReplayEvaluation, dict[str, An
         raise UserError(str(exc)) from None
     if not truth.frame_numbers:
         raise UserError(f"{args.truth}: no truth rows, so nothing to score")
-    result = replay_tracking(site, recording, truth, args.fps, area, min_confidence=args.min_confidence)
+    try:
+        result = replay_tracking(site, recording, truth, args.fps, area, min_confidence=args.min_confidence)
+    except RecordingError as exc:
+        raise UserError(str(exc)) from None
     print(format_replay(result, site))
     if args.tracks_out is not None:
         write_tracks(args.tracks_out, result.tracks)

@@ -15,7 +15,7 @@ import argparse
 import threading
 import time
 
-from bevflow.datasets.mot import DetectionRecording, RecordingError, read_detections
+from bevflow.datasets.mot import DetectionRecording, RecordingError, check_no_long_gap, read_detections
 from bevflow.schemas import Detections2D
 from bevflow.site import Site
 
@@ -31,6 +31,7 @@ def load_recording(args: argparse.Namespace, site: Site, cameras: list[str]) -> 
     sizes = {c.id: c.image_size for c in site.cameras if c.id in cameras}
     try:
         recording = read_detections(args.detections, sizes)
+        check_no_long_gap({f"{c.camera_id}.txt": c.by_frame.keys() for c in recording.cameras}, args.fps)
     except RecordingError as exc:
         raise UserError(str(exc)) from None
     if not recording.frame_numbers:

@@ -15,13 +15,16 @@ less confident is left out when the boxes are read back (``CameraRecording.boxes
 ``bevflow.detections.Boxes.distinct``), as bevflow's own detector suppresses them.
 
 Every problem in a file is a ``RecordingError`` naming the file and the line; a camera of the
-site with no file is one naming the camera.
+site with no file is one naming the camera. A replay steps through every frame number from the
+first to the last, so frames that leave more than ``LONGEST_EMPTY_S`` without a single row
+(``check_no_long_gap``) are one too: a frame number typed wrong, which would otherwise have a
+replay step through years of empty frames.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Collection, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -36,6 +39,10 @@ IntArray = NDArray[np.int64]
 MIN_CONFIDENCE = 0.5
 """Boxes below this confidence are left out unless asked for: the usual operating point of a
 COCO person detector such as Faster R-CNN, whose boxes below it are mostly not people."""
+
+LONGEST_EMPTY_S = 3600.0
+"""The longest stretch without a single row that a replay steps through: an hour of a recording
+in which no camera has a box and nobody is annotated is a frame number typed wrong."""
 
 
 class RecordingError(ValueError):
@@ -144,6 +151,29 @@ def read_truth(path: Path | str) -> WorldTruth:
         f: (np.fromiter(p, np.int64, len(p)), np.array(list(p.values()), dtype=np.float64).reshape(-1, 2))
         for f, p in people.items()
     })
+
+
+def check_no_long_gap(frames_of: Mapping[str, Collection[int]], fps: float) -> None:
+    """``RecordingError`` where the frame numbers of all ``frames_of`` sources together (a name,
+    such as a file's, to the frames it has rows in) leave more than ``LONGEST_EMPTY_S`` at
+    ``fps`` without any row, naming the stretch and the sources on either side of it."""
+    every = np.unique(np.fromiter((f for frames in frames_of.values() for f in frames), np.int64))
+    if len(every) < 2:
+        return
+    k = int(np.argmax(np.diff(every)))
+    before, after = int(every[k]), int(every[k + 1])
+    empty_s = (after - before - 1) / fps
+    if empty_s <= LONGEST_EMPTY_S:
+        return
+
+    def holding(frame: int) -> str:
+        return ", ".join(name for name, frames in frames_of.items() if frame in frames)
+
+    raise RecordingError(
+        f"frames {before + 1}..{after - 1} hold no row at all, {empty_s / 3600:,.1f} hours at {fps:g} fps, "
+        f"between frame {before} ({holding(before)}) and frame {after} ({holding(after)}): a replay steps "
+        "through every frame; check those frame numbers, or the fps"
+    )
 
 
 def _rows(path: Path, columns: int) -> Iterator[tuple[str, list[str]]]:

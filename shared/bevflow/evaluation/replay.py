@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from bevflow.datasets.mot import DetectionRecording, WorldTruth
+from bevflow.datasets.mot import DetectionRecording, WorldTruth, check_no_long_gap
 from bevflow.detections import Cylinders
 from bevflow.evaluation.detection import Area, scored_estimates
 from bevflow.live.projection import CameraProjection
@@ -118,13 +118,16 @@ def replay_tracking(
     """Replay ``recording`` through the live pipeline of ``site`` and score it against ``truth``
     (module docstring). ``tracker`` default: the site's settings, as the tracker service runs
     them; the frame rate reaches them through the time between updates (the tracker's gates
-    follow the filter's uncertainty, which grows with it)."""
+    follow the filter's uncertainty, which grows with it). ``RecordingError`` where the frames
+    leave an hour without a row (``bevflow.datasets.mot.check_no_long_gap``)."""
     if not fps > 0:
         raise ValueError(f"fps must be > 0, got {fps}")
     if not truth.frame_numbers:
         raise ValueError("the truth has no rows: nothing to score")
     config = tracker or TrackerConfig.from_thresholds(site.thresholds)
     first_scored, last = truth.frame_numbers[0], truth.frame_numbers[-1]
+    stepped = {f"{c.camera_id}.txt": {f for f in c.by_frame if f <= last} for c in recording.cameras}
+    check_no_long_gap({**stepped, "the truth": truth.by_frame.keys()}, fps)
     first = min([first_scored, *recording.frame_numbers[:1]])
     run = _Run(site, config, area, threshold_m)
     projection = CameraProjection(site)

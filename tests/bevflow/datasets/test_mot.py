@@ -5,7 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bevflow.datasets.mot import RecordingError, read_detections, read_truth
+from bevflow.datasets.mot import LONGEST_EMPTY_S, RecordingError, check_no_long_gap, read_detections, read_truth
 
 CAMERAS = {"a": (100, 50), "b": (100, 50)}
 
@@ -122,3 +122,28 @@ def test_bad_truth_names_file_and_line(tmp_path: Path, text: str, message: str) 
 def test_missing_truth_file(tmp_path: Path) -> None:
     with pytest.raises(RecordingError, match="no such file"):
         read_truth(tmp_path / "truth.txt")
+
+
+HOUR_AT_4_FPS = int(LONGEST_EMPTY_S * 4)
+
+
+@pytest.mark.parametrize(
+    ("frames_of", "message"),
+    [
+        ({"a.txt": {1, 2, 3}, "the truth": {1, 3}}, None),
+        ({"a.txt": {1}, "the truth": {2 + HOUR_AT_4_FPS}}, None),  # an hour without a row: still a recording
+        ({"a.txt": {1}, "the truth": {3 + HOUR_AT_4_FPS}},
+         rf"frames 2\.\.{2 + HOUR_AT_4_FPS} hold no row at all, 1\.0 hours at 4 fps, between frame 1 \(a\.txt\) "
+         rf"and frame {3 + HOUR_AT_4_FPS} \(the truth\)"),
+        ({"a.txt": {1, 5}, "b.txt": {5, 10**9}, "the truth": {1, 5}},
+         r"frames 6\.\.999999999 hold no row at all, 69,444\.4 hours at 4 fps, between frame 5 \(a\.txt, b\.txt, the truth\) "
+         r"and frame 1000000000 \(b\.txt\)"),
+        ({"a.txt": set(), "the truth": {10**9}}, None),  # one frame: nothing to step through
+    ],
+)
+def test_an_hour_without_a_row_is_a_frame_number_typed_wrong(frames_of: dict[str, set[int]], message: str | None) -> None:
+    if message is None:
+        check_no_long_gap(frames_of, 4.0)
+        return
+    with pytest.raises(RecordingError, match=message):
+        check_no_long_gap(frames_of, 4.0)

@@ -90,6 +90,7 @@ def test_the_area_leaves_out_unmatched_tracks_beyond_it(recording: Path, tmp_pat
         ("missing camera", (), "CVLab2.txt: no detections file for camera 'CVLab2'"),
         ("bad row", (), "CVLab1.txt:3: 'wide' is not a number"),
         ("bad truth", (), "truth.txt:1: expected at least 4"),
+        ("far truth frame", (), "and frame 100000000 (the truth): a replay steps through every frame"),
     ],
 )
 def test_bad_input_is_one_clear_message(recording: Path, capsys: pytest.CaptureFixture, change, extra, message) -> None:
@@ -102,6 +103,9 @@ def test_bad_input_is_one_clear_message(recording: Path, capsys: pytest.CaptureF
         path.write_text("\n".join(lines))
     elif change == "bad truth":
         (recording / "truth.txt").write_text("0,1,2\n")
+    elif change == "far truth frame":  # 100000 typed as 100000000: years of empty frames to step
+        with (recording / "truth.txt").open("a") as f:
+            f.write("\n100000000,1,2.0,2.0\n")
     assert main(args(recording, *extra)) == 2
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err and len(err.strip().splitlines()) == 1

@@ -123,6 +123,13 @@ def test_bad_options_are_one_clear_message(recording: Path, options: tuple[str, 
         ingest.main(args) if "--simulate" in argv else replay.load_recording(args, SITE, ["a", "b"])
 
 
+def test_a_frame_number_typed_wrong_is_refused_before_anything_is_published(recording: Path) -> None:
+    with (recording / "b.txt").open("a") as f:
+        f.write("9999999,-1,10,10,5,5,0.9\n")
+    with pytest.raises(UserError, match=r"frames \d+\.\.9999998 hold no row at all, .* and frame 9999999 \(b\.txt\)"):
+        replay.load_recording(args_for("--detections", str(recording), "--fps", "4"), SITE, ["a", "b"])
+
+
 def test_a_missing_camera_file_names_the_camera(recording: Path) -> None:
     (recording / "b.txt").unlink()
     with pytest.raises(UserError, match="no detections file for camera 'b'"):
