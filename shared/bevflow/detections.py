@@ -19,14 +19,33 @@ from typing import Any, TypeVar
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from bevflow.detect.decoders import SAME_PERSON_IOU, nms
-
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 # What selects rows of a column: one row, a slice, row numbers or a boolean mask.
 RowIndex = int | slice | list[int] | NDArray[np.integer[Any]] | NDArray[np.bool_]
 
 _Scalar = TypeVar("_Scalar", bound=np.generic)
+
+# Two boxes of one frame overlapping more than this are one person boxed twice: a detector's own
+# suppression (bevflow.detect.runtime), and that of boxes another detector recorded (Boxes.distinct).
+SAME_PERSON_IOU = 0.5
+
+
+def nms(xyxy: FloatArray, scores: FloatArray, iou_threshold: float) -> NDArray[np.int64]:
+    """Greedy non-maximum suppression; the indices kept, best score first."""
+    xyxy = np.asarray(xyxy, dtype=np.float64).reshape(-1, 4)
+    order = np.argsort(-np.asarray(scores, dtype=np.float64), kind="stable")
+    area = np.clip(xyxy[:, 2] - xyxy[:, 0], 0, None) * np.clip(xyxy[:, 3] - xyxy[:, 1], 0, None)
+    keep = []
+    while len(order):
+        i, rest = order[0], order[1:]
+        keep.append(i)
+        w = np.clip(np.minimum(xyxy[i, 2], xyxy[rest, 2]) - np.maximum(xyxy[i, 0], xyxy[rest, 0]), 0, None)
+        h = np.clip(np.minimum(xyxy[i, 3], xyxy[rest, 3]) - np.maximum(xyxy[i, 1], xyxy[rest, 1]), 0, None)
+        inter = w * h
+        iou = inter / np.maximum(area[i] + area[rest] - inter, 1e-12)
+        order = rest[iou <= iou_threshold]
+    return np.array(keep, dtype=np.int64)
 
 
 def _column(name: str, value: ArrayLike | None, n: int, default: float, dtype: type[_Scalar]) -> NDArray[_Scalar]:

@@ -16,16 +16,16 @@ FloatArray = NDArray[np.float64]
 
 
 def determinant(m: FloatArray) -> FloatArray:
-    """Determinants of (N, 2, 2) matrices."""
-    result: FloatArray = m[:, 0, 0] * m[:, 1, 1] - m[:, 0, 1] * m[:, 1, 0]
+    """Determinants of (..., 2, 2) matrices."""
+    result: FloatArray = m[..., 0, 0] * m[..., 1, 1] - m[..., 0, 1] * m[..., 1, 0]
     return result
 
 
 def inverse(m: FloatArray) -> FloatArray:
-    """Inverses of (N, 2, 2) matrices; non-finite where a matrix is singular or not finite."""
-    a, b, c, d = m[:, 0, 0], m[:, 0, 1], m[:, 1, 0], m[:, 1, 1]
+    """Inverses of (..., 2, 2) matrices; non-finite where a matrix is singular or not finite."""
+    a, b, c, d = m[..., 0, 0], m[..., 0, 1], m[..., 1, 0], m[..., 1, 1]
     with np.errstate(invalid="ignore", divide="ignore"):
         det = a * d - b * c
         inv = np.empty_like(m)
-        inv[:, 0, 0], inv[:, 0, 1], inv[:, 1, 0], inv[:, 1, 1] = d / det, -b / det, -c / det, a / det
+        inv[..., 0, 0], inv[..., 0, 1], inv[..., 1, 0], inv[..., 1, 1] = d / det, -b / det, -c / det, a / det
     return inv

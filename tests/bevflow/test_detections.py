@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import bevflow.detections
-from bevflow.detections import Boxes, Cylinders
+from bevflow.detections import Boxes, Cylinders, nms
 
 
 def _cylinders(n: int, camera: int = 0, offset: float = 0.0) -> Cylinders:
@@ -246,3 +246,17 @@ def test_near_keeps_feet_within_the_radius(radius, expected) -> None:
     xy = np.array([[1.0, 1.0], [2.0, 2.5], [4.0, 1.0], [np.nan, np.nan]])
     cylinders = Cylinders(xy=xy, height=np.full(4, 1.7), radius=np.full(4, 0.25))
     assert cylinders.near((1.0, 1.0, 5.5), radius).tolist() == expected
+
+
+@pytest.mark.parametrize(
+    ("boxes", "scores", "iou", "kept"),
+    [
+        ([[0, 0, 10, 10], [1, 0, 11, 10], [50, 50, 60, 60]], [0.9, 0.8, 0.7], 0.5, [0, 2]),
+        ([[0, 0, 10, 10], [1, 0, 11, 10]], [0.5, 0.8], 0.5, [1]),
+        ([[0, 0, 10, 10], [5, 0, 15, 10]], [0.9, 0.8], 0.5, [0, 1]),  # IoU 1/3
+        ([[0, 0, 10, 10], [5, 0, 15, 10]], [0.9, 0.8], 0.3, [0]),
+        (np.zeros((0, 4)), [], 0.5, []),
+    ],
+)
+def test_nms(boxes, scores, iou, kept) -> None:  # noqa: ANN001
+    assert nms(np.array(boxes, float), np.array(scores, float), iou).tolist() == kept

@@ -19,8 +19,8 @@ Supported output layouts (``FORMATS``):
   is objectness^0.6 · class^0.4, as FastestDet's own decoding.
 
 Every decoder keeps one class (``person_class``, 0 in COCO), drops scores under the threshold and
-returns boxes (N, 4) xyxy and scores (N,) in the model's input pixels; ``nms`` then removes
-duplicates.
+returns boxes (N, 4) xyxy and scores (N,) in the model's input pixels; ``bevflow.detections.nms``
+then removes duplicates.
 """
 
 from __future__ import annotations
@@ -34,26 +34,6 @@ FloatArray = NDArray[np.float64]
 FORMATS = ("centernet", "yolov5", "yolov8", "yolox", "fastestdet")
 CENTERNET_STRIDE = 4
 YOLOX_STRIDES = (8, 16, 32)
-# Two boxes of one frame overlapping more than this are one person boxed twice: the detector's own
-# suppression, and that of boxes another detector recorded (bevflow.detections.Boxes.distinct).
-SAME_PERSON_IOU = 0.5
-
-
-def nms(xyxy: FloatArray, scores: FloatArray, iou_threshold: float) -> NDArray[np.int64]:
-    """Greedy non-maximum suppression; the indices kept, best score first."""
-    xyxy = np.asarray(xyxy, dtype=np.float64).reshape(-1, 4)
-    order = np.argsort(-np.asarray(scores, dtype=np.float64), kind="stable")
-    area = np.clip(xyxy[:, 2] - xyxy[:, 0], 0, None) * np.clip(xyxy[:, 3] - xyxy[:, 1], 0, None)
-    keep = []
-    while len(order):
-        i, rest = order[0], order[1:]
-        keep.append(i)
-        w = np.clip(np.minimum(xyxy[i, 2], xyxy[rest, 2]) - np.maximum(xyxy[i, 0], xyxy[rest, 0]), 0, None)
-        h = np.clip(np.minimum(xyxy[i, 3], xyxy[rest, 3]) - np.maximum(xyxy[i, 1], xyxy[rest, 1]), 0, None)
-        inter = w * h
-        iou = inter / np.maximum(area[i] + area[rest] - inter, 1e-12)
-        order = rest[iou <= iou_threshold]
-    return np.array(keep, dtype=np.int64)
 
 
 def decode_centernet(

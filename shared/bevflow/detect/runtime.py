@@ -31,12 +31,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bevflow.detect.cpu import int8_dot_product
-from bevflow.detect.decoders import FORMATS, SAME_PERSON_IOU, decode_centernet, decode_fastestdet, decode_yolov5, decode_yolov8, decode_yolox, guess_format, nms
+from bevflow.detect.decoders import FORMATS, decode_centernet, decode_fastestdet, decode_yolov5, decode_yolov8, decode_yolox, guess_format
 from bevflow.detect.providers import DEFAULT_PROVIDERS, check_providers, plan_providers
 from bevflow.detect.rotated import radial_boxes
 from bevflow.detect.scaling import scale_factor
 from bevflow.detect.tiles import RIM_TILES, RimTileDetector, load_rim_tiles
-from bevflow.detections import Boxes
+from bevflow.detections import SAME_PERSON_IOU, Boxes, nms
 
 _log = logging.getLogger(__name__)
 FloatArray = NDArray[np.float64]

@@ -364,7 +364,7 @@ class Tracker:
         tracks = self._tracks
         offset = sightings.xy[None, :, :] - tracks.state[rows, None, :2]  # (tracks, sightings, 2)
         joint = tracks.covariance[rows, None, :2, :2] + sightings.covariance[None]
-        d2 = np.einsum("tsi,tsij,tsj->ts", offset, np.linalg.inv(joint), offset)
+        d2 = np.einsum("tsi,tsij,tsj->ts", offset, inverse(joint), offset)
         sighted: BoolArray = (d2 < self.config.sighting_gate_chi2).any(axis=1)
         return sighted
 

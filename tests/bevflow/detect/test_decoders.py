@@ -10,23 +10,8 @@ from bevflow.detect.decoders import (
     decode_yolov8,
     decode_yolox,
     guess_format,
-    nms,
     yolox_grid,
 )
-
-
-@pytest.mark.parametrize(
-    ("boxes", "scores", "iou", "kept"),
-    [
-        ([[0, 0, 10, 10], [1, 0, 11, 10], [50, 50, 60, 60]], [0.9, 0.8, 0.7], 0.5, [0, 2]),
-        ([[0, 0, 10, 10], [1, 0, 11, 10]], [0.5, 0.8], 0.5, [1]),
-        ([[0, 0, 10, 10], [5, 0, 15, 10]], [0.9, 0.8], 0.5, [0, 1]),  # IoU 1/3
-        ([[0, 0, 10, 10], [5, 0, 15, 10]], [0.9, 0.8], 0.3, [0]),
-        (np.zeros((0, 4)), [], 0.5, []),
-    ],
-)
-def test_nms(boxes, scores, iou, kept) -> None:  # noqa: ANN001
-    assert nms(np.array(boxes, float), np.array(scores, float), iou).tolist() == kept
 
 
 def test_decode_centernet_places_the_box_at_the_peak() -> None:
