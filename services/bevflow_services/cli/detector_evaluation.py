@@ -1,6 +1,9 @@
 """``bevflow evaluate --detector --images DIR --annotations FILE``: score the person detector on
 annotated frames (AP50, AP50_rotated, precision, recall, F1, ms per frame), optionally drawing
-what it found (``--draw DIR``).
+what it found (``--draw DIR``). Without ``--annotations`` nothing is scored: the detector runs on
+every image of the folder as it runs live (each model's own reporting threshold) and each frame's
+count of people is printed, and drawn with ``--draw``: what an installer checks on a new camera's
+first frames.
 
 Frames without calibration (no ``camera_height_m`` / ``focal_px`` in the COCO file, no
 ``--camera-height`` / ``--focal``, no ``--scale``) are fed at the scale their image circle
@@ -13,10 +16,17 @@ import argparse
 import json
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from bevflow.detect.tiles import RIM_TILES, RimTileDetector, load_rim_tiles
 
+if TYPE_CHECKING:  # ONNX Runtime loads only when a model does
+    from bevflow.detect.runtime import Detector, DetectorBank
+
 from bevflow_services.runtime import UserError
+
+
+SCORE_FLOOR = 0.05  # scoring keeps every box down to this confidence: AP needs the whole curve
 
 
 def add_detector_arguments(parser: argparse.ArgumentParser) -> None:
@@ -30,7 +40,9 @@ def add_detector_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--tile-model", type=Path, metavar="MODEL",
                        help="with rim-tiles: the ONNX model run on the tiles, a file or a shipped model's name (default: the shipped FastestDet, "
                        "fastestdet-tiles; fastestdet-coco is its COCO weights as published, yolox-nano-coco more accurate and slower)")  # fmt: skip
-    group.add_argument("--annotations", type=Path, metavar="FILE", help="COCO JSON of the --images: bbox [x,y,w,h] or rotated [cx,cy,w,h,deg]")
+    group.add_argument("--annotations", type=Path, metavar="FILE",
+                       help="COCO JSON of the --images: bbox [x,y,w,h] or rotated [cx,cy,w,h,deg]; without it nothing is "
+                       "scored: each image's people are counted (and drawn with --draw) as the live detector reports them")  # fmt: skip
     group.add_argument("--threads", type=int, default=2, metavar="N", help="ONNX Runtime threads (default 2)")
     group.add_argument("--camera-height", type=float, metavar="M", help="camera height for images without 'camera_height_m' (with --focal)")
     group.add_argument("--focal", type=float, metavar="PX", help="focal length in px for images without 'focal_px' (with --camera-height)")
@@ -46,9 +58,9 @@ def add_detector_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _check(args: argparse.Namespace) -> None:
     if not args.detector:
-        raise UserError("--images is for scoring the person detector: add --detector (and --annotations FILE)")
-    if args.annotations is None:
-        raise UserError("--detector --images DIR needs --annotations FILE (COCO JSON)")
+        raise UserError("--images is for running the person detector: add --detector (and --annotations FILE to score it)")
+    if args.annotations is None and args.turns > 1:
+        raise UserError("--turns scores turned frames against their truth: it needs --annotations FILE")
     if not args.images.is_dir():
         raise UserError(f"--images {args.images} is not a folder")
     if (args.camera_height is None) != (args.focal is None):
@@ -65,29 +77,36 @@ def _check(args: argparse.Namespace) -> None:
         raise UserError("--model rim-tiles sizes its tiles from the focal length: give --camera-height and --focal, or neither, not --scale")
 
 
+def _detector(args: argparse.Namespace, score_threshold: float | None) -> Detector | RimTileDetector | DetectorBank:
+    """The detector ``--model`` (and ``--tile-model``) name, reporting boxes down to ``score_threshold``
+    (None: each model's own, as live)."""
+    from bevflow.detect.runtime import DEFAULT_RANGES, Detector, DetectorBank
+
+    from bevflow_services.detector.models import resolve_model
+
+    if str(args.model) == RIM_TILES:
+        tiles = resolve_model(args.tile_model) if args.tile_model is not None else None
+        return load_rim_tiles(threads=args.threads, tile_model=tiles, score_threshold=score_threshold)
+    if args.model is None and args.scale is None:  # each frame gets the model of its (assumed) height
+        return DetectorBank(DEFAULT_RANGES, threads=args.threads, score_threshold=score_threshold)
+    model = resolve_model(args.model) if args.model is not None else None
+    return Detector(model, threads=args.threads, score_threshold=score_threshold)
+
+
 def run_detector_evaluation(args: argparse.Namespace) -> int:
     from bevflow.detect.coco import CocoError, read_coco
-    from bevflow.detect.runtime import DEFAULT_RANGES, Detector, DetectorBank, DetectorError
+    from bevflow.detect.runtime import DetectorBank, DetectorError
     from bevflow.evaluation.detector import detect_turned_frames, score_frames
     from bevflow.evaluation.drawing import write_drawings
     from bevflow.evaluation.turned import TurnedScores, turn_angles
 
-    from bevflow_services.detector.models import resolve_model
-
     _check(args)
+    if args.annotations is None:
+        return _run_unannotated(args)
     try:
         if args.turns > 1 and not all(e.oriented for e in read_coco(args.annotations, args.images)):
             raise UserError(f"--turns needs rotated truth boxes ([cx, cy, w, h, degrees]); {args.annotations} has axis-aligned ones")
-        # Score every detection: AP needs the whole precision-recall curve.
-        detector: Detector | RimTileDetector | DetectorBank
-        if str(args.model) == RIM_TILES:
-            tiles = resolve_model(args.tile_model) if args.tile_model is not None else None
-            detector = load_rim_tiles(threads=args.threads, tile_model=tiles, score_threshold=0.05)
-        elif args.model is None and args.scale is None:  # each frame gets the model of its (assumed) height
-            detector = DetectorBank(DEFAULT_RANGES, threads=args.threads, score_threshold=0.05)
-        else:
-            model = resolve_model(args.model) if args.model is not None else None
-            detector = Detector(model, threads=args.threads, score_threshold=0.05)
+        detector = _detector(args, SCORE_FLOOR)  # every detection scored: AP needs the whole precision-recall curve
         degrees = turn_angles(args.turns)  # the first is none: the frames as they are
         per_turn = detect_turned_frames(detector, args.annotations, degrees, args.images, args.camera_height, args.focal,
                                         args.scale, log=print)  # fmt: skip
@@ -114,6 +133,38 @@ def run_detector_evaluation(args: argparse.Namespace) -> int:
     if args.json is not None:
         try:
             args.json.write_text(json.dumps(scores.as_dict() | ({} if spread is None else {"turned": spread.as_dict()}), indent=2) + "\n")
+        except OSError as exc:
+            raise UserError(f"cannot write {args.json}: {exc.strerror or exc}") from None
+    return 0
+
+
+def _run_unannotated(args: argparse.Namespace) -> int:
+    """Every image of ``--images`` through the detector as it runs live: each frame's people
+    counted, printed, drawn (``--draw``) and written (``--json``); nothing scored."""
+    from bevflow.detect.coco import CocoError
+    from bevflow.detect.runtime import DetectorError
+    from bevflow.evaluation.detector import detect_turned_frames
+    from bevflow.evaluation.drawing import write_drawings
+
+    try:
+        [(results, ms)] = detect_turned_frames(_detector(args, None), None, [0.0], args.images,
+                                              args.camera_height, args.focal, args.scale, log=print)  # fmt: skip
+        drawn = write_drawings(results, args.draw, 0.0) if args.draw is not None else []  # all the detector reported
+    except (DetectorError, CocoError, FileNotFoundError) as exc:
+        raise UserError(str(exc)) from None
+    except OSError as exc:
+        raise UserError(f"cannot write the drawings: {exc}") from None
+    people = {r.entry.path.name: len(r.confidence) for r in results}
+    for name, count in people.items():
+        print(f"{name}: {count} {'person' if count == 1 else 'people'}")
+    print(f"{len(results)} images, {sum(people.values())} people as the live detector reports them (each model's own "
+          f"score threshold), {ms:.1f} ms per frame; nothing scored: no --annotations")  # fmt: skip
+    if drawn:
+        print(f"drew {len(drawn)} frames into {args.draw}")
+    if args.json is not None:
+        doc = {"images": len(results), "ms_per_frame": ms, "people": people}
+        try:
+            args.json.write_text(json.dumps(doc, indent=2) + "\n")
         except OSError as exc:
             raise UserError(f"cannot write {args.json}: {exc.strerror or exc}") from None
     return 0

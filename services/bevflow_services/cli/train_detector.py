@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -28,6 +29,9 @@ steps, each resumable (run the same command again to continue):
   bevflow evaluate --detector --model model.onnx --images data/eval --annotations data/eval/annotations.json
   bevflow train-detector quantize --model model.onnx --frames data/cal/annotations.json --out model-int8.onnx
                                                                          an INT8 copy, calibrated on other held-out frames
+  bevflow train-detector set-threshold --model model.onnx --threshold 0.5
+                                                                         the score it reports people from, kept in the file
+                                                                         (evaluate --detector prints the best-F1 one)
 
 Rendered crops are drawn at the detector's input scale (a person at the image centre ~20 px).
 COCO images are scaled from their 'camera_height_m' and 'focal_px' keys when present, else by --scale.
@@ -48,8 +52,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     render.add_argument("--out", type=Path, required=True, metavar="DIR", help="folder for the shards (resumes if it has some)")
     render.add_argument("--count", type=int, default=4000, metavar="N", help="number of samples (default 4000)")
     render.add_argument("--seed", type=int, default=1, metavar="N", help="random seed (default 1)")
-    render.add_argument("--heights", type=float, nargs=2, default=[3.0, 10.0], metavar=("LOW", "HIGH"),
-                        help="camera mounting heights to draw from, metres (default 3 10; e.g. 3 5 to fine-tune for low ceilings)")
+    _heights_option(render, "e.g. 3 5 to fine-tune for low ceilings")
     _scene_options(render)
     render.add_argument("--zoom", type=float, default=1.0, metavar="Z",
                         help="render at Z x the detector's scale (default 1: a person at the image centre is 20 px across); "
@@ -59,6 +62,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     evalset.add_argument("--out", type=Path, required=True, metavar="DIR", help="folder for the PNG frames and annotations.json")
     evalset.add_argument("--count", type=int, default=100, metavar="N", help="number of frames (default 100)")
     evalset.add_argument("--seed", type=int, default=1000, metavar="N", help="random seed, unlike the training seed (default 1000)")
+    _heights_option(evalset, "e.g. 3 5 for the cameras the rim tiles serve")
     _scene_options(evalset)
     evalset.set_defaults(func=_render_eval)
     train = sub.add_parser("train", help="train (or continue training) the detector")
@@ -91,6 +95,24 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     quantize.add_argument("--count", type=int, default=32, metavar="N", help="frames to calibrate on, the first N (default 32)")
     quantize.add_argument("--out", type=Path, required=True, metavar="FILE", help="the INT8 .onnx file to write")
     quantize.set_defaults(func=_quantize)
+    threshold = sub.add_parser("set-threshold", help="keep the score a model reports people from in its file (needs onnx)")
+    threshold.add_argument("--model", type=Path, required=True, metavar="FILE", help="the .onnx model, changed in place")
+    threshold.add_argument("--threshold", type=float, required=True, metavar="T",
+                           help="0 to 1: the detector reports people scoring at least this unless told otherwise "
+                           "(e.g. the best-F1 score evaluate --detector prints on frames of the model's cameras)")  # fmt: skip
+    threshold.set_defaults(func=_set_threshold)
+
+
+def _heights_option(parser: argparse.ArgumentParser, example: str) -> None:
+    parser.add_argument("--heights", type=float, nargs=2, default=[3.0, 10.0], metavar=("LOW", "HIGH"),
+                        help=f"camera mounting heights to draw from, metres (default 3 10; {example})")
+
+
+def _heights(args: argparse.Namespace) -> tuple[float, float]:
+    low, high = args.heights
+    if not 2.0 <= low < high <= 20.0:
+        raise UserError(f"--heights needs 2 <= LOW < HIGH <= 20 metres, got {low:g} {high:g}")
+    return low, high
 
 
 def _scene_options(parser: argparse.ArgumentParser) -> None:
@@ -128,10 +150,7 @@ def _count(value: int, name: str) -> int:
 def _render(args: argparse.Namespace) -> int:
     from bevflow.training.dataset import render_dataset
 
-    low, high = args.heights
-    if not 2.0 <= low < high <= 20.0:
-        raise UserError(f"--heights needs 2 <= LOW < HIGH <= 20 metres, got {low:g} {high:g}")
-    written = render_dataset(args.out, _count(args.count, "--count"), seed=args.seed, log=print, heights=(low, high),
+    written = render_dataset(args.out, _count(args.count, "--count"), seed=args.seed, log=print, heights=_heights(args),
                              mix=_mix(args), zoom=_zoom(args.zoom))
     print(f"{written} new shards in {args.out}")
     return 0
@@ -140,7 +159,7 @@ def _render(args: argparse.Namespace) -> int:
 def _render_eval(args: argparse.Namespace) -> int:
     from bevflow.training.dataset import render_evaluation_set
 
-    path = render_evaluation_set(args.out, _count(args.count, "--count"), seed=args.seed, mix=_mix(args))
+    path = render_evaluation_set(args.out, _count(args.count, "--count"), seed=args.seed, mix=_mix(args), heights=_heights(args))
     print(f"wrote {args.count} frames and {path}")
     return 0
 
@@ -201,8 +220,24 @@ def _quantize(args: argparse.Namespace) -> int:
     return 0
 
 
+def _set_threshold(args: argparse.Namespace) -> int:
+    from bevflow.training.metadata import set_score_threshold
+
+    if not args.model.is_file():
+        raise UserError(f"--model {args.model}: no such model file")
+    if not (math.isfinite(args.threshold) and 0.0 < args.threshold < 1.0):
+        raise UserError(f"--threshold must lie between 0 and 1, got {args.threshold:g}")
+    try:
+        set_score_threshold(args.model, args.threshold)
+    except Exception as exc:  # onnx raises its own types for a file that is not a model
+        raise UserError(f"cannot write the threshold into {args.model}: {exc}") from None
+    print(f"{args.model}: reports people scoring at least {args.threshold:g}")
+    return 0
+
+
 # `bevflow evaluate --detector --images DIR --annotations FILE` lives in its own module; these
 # names stay importable from here for ``bevflow_services.cli.evaluate``.
 from bevflow_services.cli.detector_evaluation import add_detector_arguments, run_detector_evaluation  # noqa: E402
 
 __all__ = ["add_detector_arguments", "register", "run_detector_evaluation"]
+

@@ -41,7 +41,7 @@ import numpy as np
 
 from bevflow.detect.providers import check_providers
 from bevflow.camera import Camera
-from bevflow.detect.runtime import Detector, DetectorError
+from bevflow.detect.runtime import SCORE_THRESHOLD, Detector, DetectorError
 from bevflow.detect.still import StillFrames
 from bevflow.detect.tiles import RimTileDetector
 from bevflow.detect.window import detection_window, scaled_window
@@ -73,8 +73,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--threads", type=int, default=None, metavar="N",
                        help="ONNX Runtime threads per inference (default: the usable CPU cores shared among the "
                        "workers, at least 1)")
-    group.add_argument("--score-threshold", type=float, default=0.4,
-                       help="lowest confidence of a reported person, 0 to 1 (default 0.4)")
+    group.add_argument("--score-threshold", type=float, default=None,
+                       help="lowest confidence of a reported person, 0 to 1, for every model (default: each model's own, "
+                       f"kept in its file, else {SCORE_THRESHOLD:g})")
     group.add_argument("--providers", default=None, metavar="LIST",
                        help="ONNX Runtime execution providers, most wanted first, e.g. cuda,cpu or openvino,cpu "
                        "(default: the site file's detector_providers, else cpu); missing ones fall back with a warning")
@@ -179,7 +180,7 @@ def main(args: argparse.Namespace) -> int:
     unknown = sorted(set(cameras) - set(site.camera_ids))
     if unknown:
         raise UserError(f"--cameras: site {site.site!r} has no camera {', '.join(unknown)}")
-    if not 0.0 <= args.score_threshold <= 1.0:
+    if args.score_threshold is not None and not 0.0 <= args.score_threshold <= 1.0:
         raise UserError(f"--score-threshold must be between 0 and 1, got {args.score_threshold}")
     site_path = Path(args.site)
     site_dir = site_path.parent if site_path.is_file() else None

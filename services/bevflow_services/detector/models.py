@@ -76,7 +76,7 @@ class CameraModels:
         default: str | Path | None = None,
         ranges: Sequence[HeightRange] | None = None,
         threads: int = 2,
-        score_threshold: float = 0.4,
+        score_threshold: float | None = None,
         providers: Sequence[str] = DEFAULT_PROVIDERS,
         load: type[Detector] = Detector,
     ) -> None:

@@ -4,7 +4,8 @@ COCO files may hold axis-aligned ``bbox`` [x, y, w, h] or the rotated [cx, cy, w
 used by public overhead fisheye sets (CEPDOF, WEPDTOF); only the person category is read. A
 rotated box counts as its enclosing axis-aligned rectangle wherever axis-aligned boxes are
 compared (the detector's boxes are axis-aligned, the paper's D). Images may carry
-``camera_height_m`` and ``focal_px`` for height-adaptive scaling.
+``camera_height_m`` and ``focal_px`` for height-adaptive scaling. A folder of frames nobody
+annotated (``unannotated_images``) is read as images whose people are not known.
 """
 
 from __future__ import annotations
@@ -12,12 +13,15 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
 from numpy.typing import NDArray
+from pydantic import BaseModel, Field, ValidationError
 
 FloatArray = NDArray[np.float64]
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 
 
 @dataclass(frozen=True, eq=False)
@@ -30,6 +34,7 @@ class CocoImage:
     camera_height_m: float | None = None
     focal_px: float | None = None
     oriented: bool = False  # whether the file gave angles ([cx, cy, w, h, deg] boxes)
+    annotated: bool = True  # False: nobody annotated the frame (``rotated`` is empty: not known)
 
     @property
     def xyxy(self) -> FloatArray:
@@ -40,41 +45,93 @@ class CocoError(ValueError):
     """A COCO file that cannot be read; the message says why."""
 
 
+class _Image(BaseModel):
+    id: int | str
+    file_name: str = Field(min_length=1)
+    camera_height_m: Positive | None = None
+    focal_px: Positive | None = None
+
+
+class _Annotation(BaseModel):
+    id: int | str | None = None
+    image_id: int | str
+    category_id: int | str | None = None
+    bbox: list[Finite] = Field(min_length=4, max_length=5)
+
+
+class _Category(BaseModel):
+    id: int | str
+    name: str = ""
+
+
+class _CocoFile(BaseModel):
+    """The part of a COCO file read here; other keys are ignored."""
+
+    images: list[_Image]
+    annotations: list[_Annotation]
+    categories: list[_Category] = []
+
+
+def _parse(annotations: Path) -> _CocoFile:
+    try:
+        doc = json.loads(Path(annotations).read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise CocoError(f"cannot read {annotations}: {exc}") from None
+    if not isinstance(doc, dict) or "images" not in doc or "annotations" not in doc:
+        raise CocoError(f"{annotations} is not a COCO file (needs 'images' and 'annotations')")
+    try:
+        return _CocoFile.model_validate(doc)
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        where = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in first["loc"]).lstrip(".")
+        more = f" (and {exc.error_count() - 1} more)" if exc.error_count() > 1 else ""
+        message = "should be a JSON object" if first["type"] == "model_type" else first["msg"]
+        raise CocoError(f"{annotations}: {where}: {message}{more}") from None
+
+
 def read_coco(annotations: Path, images_dir: Path | None = None) -> list[CocoImage]:
     """Person boxes per image from a COCO JSON file. ``bbox`` of 4 numbers is [x, y, w, h]; of 5,
     the rotated [cx, cy, w, h, degrees]. Images without annotations are kept (no people).
     Optional per-image keys ``camera_height_m`` and ``focal_px`` enable height-adaptive scaling."""
-    try:
-        doc = json.loads(Path(annotations).read_text())
-    except (OSError, json.JSONDecodeError) as exc:
-        raise CocoError(f"cannot read {annotations}: {exc}") from None
-    if not isinstance(doc, dict) or "images" not in doc or "annotations" not in doc:
-        raise CocoError(f"{annotations} is not a COCO file (needs 'images' and 'annotations')")
-    cats = doc.get("categories") or []
-    person = {c["id"] for c in cats if str(c.get("name", "")).lower() == "person"} or ({c["id"] for c in cats} if len(cats) == 1 else None)
+    doc = _parse(annotations)
+    cats = doc.categories
+    person = {c.id for c in cats if c.name.lower() == "person"} or ({c.id for c in cats} if len(cats) == 1 else None)
     folder = Path(images_dir) if images_dir is not None else Path(annotations).parent
-    boxes: dict[object, list[list[float]]] = {im["id"]: [] for im in doc["images"]}
+    boxes: dict[int | str, list[list[float]]] = {im.id: [] for im in doc.images}
     oriented = False
-    for ann in doc["annotations"]:
-        if person is not None and ann.get("category_id") not in person:
+    for ann in doc.annotations:
+        if person is not None and ann.category_id not in person:
             continue
-        b = [float(v) for v in ann["bbox"]]
+        b = ann.bbox
         if len(b) == 4:
             b = [b[0] + b[2] / 2, b[1] + b[3] / 2, b[2], b[3], 0.0]
-        elif len(b) == 5:
-            oriented = True
         else:
-            raise CocoError(f"annotation {ann.get('id')}: bbox needs 4 or 5 numbers, got {len(b)}")
-        if ann["image_id"] not in boxes:
-            raise CocoError(f"annotation {ann.get('id')} refers to unknown image {ann['image_id']}")
-        boxes[ann["image_id"]].append(b)
+            oriented = True
+        if ann.image_id not in boxes:
+            raise CocoError(f"{annotations}: annotation {ann.id} refers to unknown image {ann.image_id!r}")
+        boxes[ann.image_id].append(b)
     # A file of rotated boxes is oriented as a whole, so an image whose people all happen to lie
     # at 0° is scored as rotated like the rest.
     return [
-        CocoImage(folder / im["file_name"], np.array(boxes[im["id"]], dtype=np.float64).reshape(-1, 5),
-                  im.get("camera_height_m"), im.get("focal_px"), oriented)
-        for im in doc["images"]
+        CocoImage(folder / im.file_name, np.array(boxes[im.id], dtype=np.float64).reshape(-1, 5),
+                  im.camera_height_m, im.focal_px, oriented)
+        for im in doc.images
     ]  # fmt: skip
+
+
+IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp")
+
+
+def unannotated_images(folder: Path) -> list[CocoImage]:
+    """Every image file of ``folder`` (by its suffix, any case), in name order, as frames nobody
+    annotated; ``CocoError`` for a folder without one."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise CocoError(f"{folder} is not a folder")
+    paths = sorted(p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES)
+    if not paths:
+        raise CocoError(f"{folder} holds no image ({', '.join(IMAGE_SUFFIXES)})")
+    return [CocoImage(p, np.zeros((0, 5)), annotated=False) for p in paths]
 
 
 def rotated_to_xyxy(rotated: FloatArray) -> FloatArray:

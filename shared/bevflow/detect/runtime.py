@@ -42,6 +42,9 @@ _log = logging.getLogger(__name__)
 FloatArray = NDArray[np.float64]
 DEFAULT_MODEL = Path(__file__).resolve().parent.parent / "data" / "models" / "bevflow-person-centernet.onnx"
 PAD_MULTIPLE = 32
+SCORE_THRESHOLD = 0.4
+"""The lowest confidence of a person a model reports live unless its file names its own
+(``SCORE_THRESHOLD_METADATA_KEY``); evaluations score every box down to a lower floor."""
 LETTERBOX_GREY = 114
 
 
@@ -80,6 +83,10 @@ class PreparedInput:
 
 
 ZOOM_METADATA_KEY = "bevflow.zoom"
+SCORE_THRESHOLD_METADATA_KEY = "bevflow.score_threshold"
+"""A model's own reporting threshold, in its file: scores of different networks mean different
+things (FastestDet's are objectness^0.6 · class^0.4, the project's model's heatmap peaks), so one
+number does not suit them all. Written by ``bevflow train-detector set-threshold``."""
 """ONNX metadata: the model's input scale as a multiple of ``bevflow.detect.scaling``'s (a model
 trained on renders at ``render --zoom 1.2`` sees a person at the image centre 24 px across)."""
 
@@ -95,7 +102,7 @@ class Detector:
         self,
         model_path: str | Path | None = None,
         threads: int = 2,
-        score_threshold: float = 0.4,
+        score_threshold: float | None = None,
         nms_iou: float = SAME_PERSON_IOU,
         model_format: str = "auto",
         person_class: int = 0,
@@ -124,8 +131,9 @@ class Detector:
         self.rgb = yolo_like if rgb is None else rgb
         unit_range = yolo_like or model_format == "fastestdet"  # FastestDet: BGR / 255
         self.input_scale = (1 / 255.0 if unit_range else 1.0) if input_scale is None else input_scale
-        self.score_threshold, self.nms_iou, self.person_class = score_threshold, nms_iou, person_class
+        self.nms_iou, self.person_class = nms_iou, person_class
         self.zoom = _model_zoom(self.session)
+        self.score_threshold = _model_score_threshold(self.session) if score_threshold is None else score_threshold
 
     # --- public API ----------------------------------------------------------------------------
     def detect(self, image_bgr: NDArray[np.uint8], camera_height_m: float, focal_px: float) -> Boxes:
@@ -268,15 +276,26 @@ def _preload_cuda_libraries() -> None:
 
 
 def _model_zoom(session: InferenceSession) -> float:
+    return _metadata_number(session, ZOOM_METADATA_KEY, 1.0, 0.25, 4.0)
+
+
+def _model_score_threshold(session: InferenceSession) -> float:
+    return _metadata_number(session, SCORE_THRESHOLD_METADATA_KEY, SCORE_THRESHOLD, 0.0, 1.0)
+
+
+def _metadata_number(session: InferenceSession, key: str, default: float, low: float, high: float) -> float:
+    """The number the model file keeps under ``key`` (``default`` where it keeps none)."""
     meta = getattr(session, "get_modelmeta", None)  # test doubles may have none
-    value = meta().custom_metadata_map.get(ZOOM_METADATA_KEY, "1") if meta is not None else "1"
+    value = meta().custom_metadata_map.get(key) if meta is not None else None
+    if value is None:
+        return default
     try:
-        zoom = float(value)
+        number = float(value)
     except ValueError:
-        raise DetectorError(f"model metadata {ZOOM_METADATA_KEY}={value!r} is not a number") from None
-    if not 0.25 <= zoom <= 4.0:
-        raise DetectorError(f"model metadata {ZOOM_METADATA_KEY}={zoom:g} is outside 0.25-4")
-    return zoom
+        raise DetectorError(f"model metadata {key}={value!r} is not a number") from None
+    if not low <= number <= high:
+        raise DetectorError(f"model metadata {key}={number:g} is outside {low:g}-{high:g}")
+    return number
 
 
 @dataclass(frozen=True)
@@ -291,7 +310,7 @@ class HeightRange:
 class DetectorOptions(TypedDict, total=False):
     """``Detector``'s settings other than the model and threads, as ``DetectorBank`` passes them on."""
 
-    score_threshold: float
+    score_threshold: float | None
     nms_iou: float
     model_format: str
     person_class: int

@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bevflow.detect.circle import AssumedCalibration, assume_calibration
-from bevflow.detect.coco import CocoImage, read_coco
+from bevflow.detect.coco import CocoImage, read_coco, unannotated_images
 from bevflow.detect.rotated import outline_xyxy, radial_boxes, rotated_iou_matrix
 from bevflow.detections import Boxes
 from bevflow.evaluation.turned import turned
@@ -251,7 +251,9 @@ class FrameResult:
 
     @property
     def detections_rotated(self) -> FloatArray:
-        return self.rotated if self.entry.oriented else _upright(self.xyxy)
+        """As the detector turned them, unless the truth is upright boxes (then compared as the
+        detections' enclosing boxes)."""
+        return self.rotated if self.entry.oriented or not self.entry.annotated else _upright(self.xyxy)
 
 
 def _upright(xyxy: FloatArray) -> FloatArray:
@@ -278,7 +280,7 @@ def detect_frames(
 
 def detect_turned_frames(
     detector: ImageDetector,
-    annotations: Path,
+    annotations: Path | None,
     degrees: Sequence[float],
     images_dir: Path | None = None,
     camera_height_m: float | None = None,
@@ -289,8 +291,14 @@ def detect_turned_frames(
 ) -> list[tuple[list[FrameResult], float]]:
     """``detect_frames`` once for each of ``degrees``: every frame and its truth turned by that
     much about the image circle's centre (``bevflow.evaluation.turned``; 0 leaves it as it is).
-    Each frame is read and set up once for all of them."""
-    entries = read_coco(annotations, images_dir)
+    Each frame is read and set up once for all of them. Without ``annotations``, every image of
+    ``images_dir`` is run, its people not known (``bevflow.detect.coco.unannotated_images``)."""
+    if annotations is not None:
+        entries = read_coco(annotations, images_dir)
+    elif images_dir is not None:
+        entries = unannotated_images(images_dir)
+    else:
+        raise ValueError("give the annotations, the images' folder, or both")
     results: list[list[FrameResult]] = [[] for _ in degrees]
     seconds = [0.0] * len(degrees)
     for k, entry in enumerate(entries):

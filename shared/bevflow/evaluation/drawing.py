@@ -3,7 +3,8 @@
 Each frame is written with the truth in green, the detections kept at the scoring's best-F1
 threshold in yellow where they match a person (rotated IoU ≥ 0.5, as ``AP50_rotated`` counts) and
 red where they match nobody, each with its score; a cross marks the image circle's centre that
-radial angles were taken about.
+radial angles were taken about. On a frame nobody annotated there is nothing to judge by: its
+detections are drawn in blue.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from bevflow.evaluation.detector import FrameResult, match_by_iou, read_image
 TRUTH = (80, 220, 80)
 HIT = (0, 220, 255)
 MISS = (40, 40, 255)
+UNJUDGED = (255, 160, 40)
 
 
 def draw_frame(image: NDArray[np.uint8], result: FrameResult, threshold: float) -> NDArray[np.uint8]:
@@ -32,7 +34,7 @@ def draw_frame(image: NDArray[np.uint8], result: FrameResult, threshold: float) 
     hits = match_by_iou(rotated_iou_matrix(dets, result.truth_rotated), conf)
     _polygons(out, result.truth_rotated, TRUTH, line)
     for box, score, hit in zip(dets, conf, hits, strict=True):
-        colour = HIT if hit else MISS
+        colour = (HIT if hit else MISS) if result.entry.annotated else UNJUDGED
         _polygons(out, box[None], colour, line)
         corner = rotated_corners(box[None])[0].min(axis=0)
         cv2.putText(out, f"{score:.2f}", (int(corner[0]), int(corner[1]) - 2), cv2.FONT_HERSHEY_SIMPLEX, 0.35 * line, colour, line)

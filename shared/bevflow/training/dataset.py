@@ -265,8 +265,8 @@ def render_dataset(folder: Path, count: int, seed: int = 0, shard_size: int = 50
 
 
 def render_evaluation_set(folder: Path, count: int, seed: int = 1000, zoom: tuple[float, float] = (1.0, 1.4),
-                          mix: SceneMix = SceneMix()) -> Path:
-    """Render ``count`` whole frames (cameras 3–10 m high) as PNG files plus ``annotations.json``
+                          mix: SceneMix = SceneMix(), heights: tuple[float, float] = MOUNTING_HEIGHTS_M) -> Path:
+    """Render ``count`` whole frames (cameras ``heights`` high, 3–10 m by default) as PNG files plus ``annotations.json``
     (COCO, with ``camera_height_m`` and ``focal_px`` per image) into ``folder``; frames are
     ``zoom`` times the detector's input scale, so evaluating them exercises the resize too.
     Use a seed the training data did not use; ``mix`` as in ``render_sample``. Returns the
@@ -278,7 +278,7 @@ def render_evaluation_set(folder: Path, count: int, seed: int = 1000, zoom: tupl
         rng = np.random.default_rng([seed, k])
         z = float(rng.uniform(*zoom))
         # Whole frames: slivers of people cut by the image circle's rim are not worth a box.
-        sample = render_sample(rng, size=None, zoom=z, min_pixels=int(30 * z * z), mix=mix)
+        sample = render_sample(rng, size=None, zoom=z, min_pixels=int(30 * z * z), heights=heights, mix=mix)
         name = f"frame-{k:05d}.png"
         cv2.imwrite(str(folder / name), sample.image)
         h, w = sample.image.shape[:2]

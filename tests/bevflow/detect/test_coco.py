@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bevflow.detect.coco import CocoError, read_coco, rotated_to_xyxy, write_coco
+from bevflow.detect.coco import CocoError, read_coco, rotated_to_xyxy, unannotated_images, write_coco
 
 
 @pytest.mark.parametrize(
@@ -57,8 +57,25 @@ def test_write_then_read_round_trip(tmp_path: Path) -> None:
     [
         ([], "not a COCO file"),
         ({"images": []}, "not a COCO file"),
-        ({"images": [{"id": 1, "file_name": "a"}], "annotations": [{"id": 1, "image_id": 1, "bbox": [1, 2, 3]}]}, "4 or 5"),
-        ({"images": [{"id": 1, "file_name": "a"}], "annotations": [{"id": 1, "image_id": 9, "bbox": [1, 2, 3, 4]}]}, "unknown image"),
+        ({"images": [{"id": 1, "file_name": "a"}], "annotations": [{"id": 1, "image_id": 1, "bbox": [1, 2, 3]}]},
+         r"annotations\[0\]\.bbox: List should have at least 4 items"),
+        ({"images": [{"id": 1, "file_name": "a"}], "annotations": [{"id": 1, "image_id": 1, "bbox": [1, 2, 3, 4, 5, 6]}]},
+         r"annotations\[0\]\.bbox: List should have at most 5 items"),
+        ({"images": [{"id": 1, "file_name": "a"}], "annotations": [{"id": 7, "image_id": 9, "bbox": [1, 2, 3, 4]}]},
+         "annotation 7 refers to unknown image 9"),
+        ({"images": [{"id": 1}], "annotations": []}, r"images\[0\]\.file_name: Field required"),
+        ({"images": [1], "annotations": []}, r"images\[0\]: should be a JSON object"),
+        ({"images": "x", "annotations": []}, "images: Input should be a valid list"),
+        ({"images": [{"id": 1, "file_name": "a"}], "annotations": [{"id": 1, "image_id": 1}]}, r"annotations\[0\]\.bbox: Field required"),
+        ({"images": [{"id": 1, "file_name": "a"}], "annotations": [{"id": 1, "bbox": [1, 2, 3, 4]}]}, r"annotations\[0\]\.image_id: Field required"),
+        ({"images": [{"id": 1, "file_name": "a"}], "annotations": [{"id": 1, "image_id": 1, "bbox": [1, 2, "x", 4]}]},
+         r"annotations\[0\]\.bbox\[2\]: Input should be a valid number"),
+        ({"images": [{"id": 1, "file_name": "a"}], "annotations": [{"id": 1, "image_id": 1, "bbox": [1, 2, float("nan"), 4]}]},
+         r"annotations\[0\]\.bbox\[2\]: Input should be a finite number"),
+        ({"images": [{"id": 1, "file_name": "a", "camera_height_m": "high"}], "annotations": []},
+         r"images\[0\]\.camera_height_m: Input should be a valid number"),
+        ({"images": [{"id": 1, "file_name": "a", "focal_px": -3}], "annotations": []}, r"images\[0\]\.focal_px: Input should be greater than 0"),
+        ({"images": [{"id": 1}, {"id": 2}], "annotations": []}, r"images\[0\]\.file_name: Field required \(and 1 more\)"),
     ],
 )
 def test_bad_files_say_why(tmp_path: Path, doc, message: str) -> None:  # noqa: ANN001
@@ -69,3 +86,29 @@ def test_bad_files_say_why(tmp_path: Path, doc, message: str) -> None:  # noqa: 
 def test_missing_file(tmp_path: Path) -> None:
     with pytest.raises(CocoError, match="cannot read"):
         read_coco(tmp_path / "nope.json")
+
+
+@pytest.mark.parametrize(
+    ("files", "found"),
+    [
+        (["b.jpg", "a.PNG", "notes.txt", "c.jpeg", "d.webp"], ["a.PNG", "b.jpg", "c.jpeg", "d.webp"]),
+        (["frame.tiff", "frame.bmp"], ["frame.bmp", "frame.tiff"]),
+        (["notes.txt"], None),
+        ([], None),
+    ],
+)
+def test_a_folder_of_frames_nobody_annotated(tmp_path: Path, files: list[str], found: list[str] | None) -> None:
+    for name in files:
+        (tmp_path / name).write_bytes(b"")
+    if found is None:
+        with pytest.raises(CocoError, match="holds no image"):
+            unannotated_images(tmp_path)
+        return
+    entries = unannotated_images(tmp_path)
+    assert [e.path.name for e in entries] == found
+    assert all(not e.annotated and e.rotated.shape == (0, 5) for e in entries)
+
+
+def test_unannotated_images_needs_a_folder(tmp_path: Path) -> None:
+    with pytest.raises(CocoError, match="is not a folder"):
+        unannotated_images(tmp_path / "nope")

@@ -12,6 +12,7 @@ from bevflow.detect.runtime import (
     DEFAULT_MODEL,
     DEFAULT_RANGES,
     INT8_MODEL,
+    SCORE_THRESHOLD,
     Detector,
     DetectorBank,
     DetectorError,
@@ -90,6 +91,32 @@ def test_boxes_come_back_in_frame_pixels(height: float, focal: float, bright: tu
 def test_a_bad_zoom_in_the_model_file_is_a_clear_error(zoom: str, message: str) -> None:
     with pytest.raises(DetectorError, match=f"model metadata bevflow.zoom={message}"):
         Detector(session=FakeCenterNet(metadata={"bevflow.zoom": zoom}))
+
+
+@pytest.mark.parametrize(
+    ("metadata", "given", "used"),
+    [(None, None, 0.4),  # no threshold in the file: SCORE_THRESHOLD
+     ({"bevflow.score_threshold": "0.56"}, None, 0.56),  # the file's own
+     ({"bevflow.score_threshold": "0.56"}, 0.05, 0.05),  # the caller's wins (an evaluation's floor, --score-threshold)
+     ({"bevflow.zoom": "1.5"}, None, 0.4)],
+)
+def test_a_model_reports_from_its_own_threshold_unless_told(metadata: dict[str, str] | None, given: float | None, used: float) -> None:
+    assert Detector(session=FakeCenterNet(metadata=metadata), score_threshold=given).score_threshold == used
+    assert SCORE_THRESHOLD == 0.4
+
+
+@pytest.mark.parametrize(("value", "message"), [("high", "'high' is not a number"), ("1.5", "1.5 is outside 0-1")])
+def test_a_bad_threshold_in_the_model_file_is_a_clear_error(value: str, message: str) -> None:
+    with pytest.raises(DetectorError, match=f"model metadata bevflow.score_threshold={message}"):
+        Detector(session=FakeCenterNet(metadata={"bevflow.score_threshold": value}))
+
+
+def test_the_shipped_tile_model_keeps_its_own_threshold_and_the_general_model_none() -> None:
+    from bevflow.detect.tiles import TILE_MODEL
+
+    tiles, general = Detector(TILE_MODEL, threads=1), Detector(DEFAULT_MODEL, threads=1)
+    assert 0.4 < tiles.score_threshold < 0.7  # the best-F1 score on renders 3-5 m up (model card)
+    assert general.score_threshold == SCORE_THRESHOLD
 
 
 def test_fixed_size_models_get_a_letterbox() -> None:

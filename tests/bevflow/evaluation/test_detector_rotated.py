@@ -13,8 +13,8 @@ import pytest
 from bevflow.detect.coco import read_coco, rotated_to_xyxy
 from bevflow.detect.rotated import outline_xyxy, radial_angle, rotated_iou_matrix
 from bevflow.detections import Boxes
-from bevflow.evaluation.detector import detect_frames, evaluate_detector, frame_setup, score_boxes, score_frames
-from bevflow.evaluation.drawing import HIT, MISS, TRUTH, write_drawings
+from bevflow.evaluation.detector import detect_frames, detect_turned_frames, evaluate_detector, frame_setup, score_boxes, score_frames
+from bevflow.evaluation.drawing import HIT, MISS, TRUTH, UNJUDGED, write_drawings
 
 SQUARE = np.array([[0.0, 0.0, 10.0, 10.0]])
 
@@ -161,3 +161,22 @@ def test_drawings_show_truth_and_detections(tmp_path: Path) -> None:
     assert ((r > 150) & (g > 150) & (b < 110)).any()  # the matched detection, yellow
     assert not ((r > 150) & (g < 110) & (b < 110)).any()  # the other scored below the threshold: not drawn
     assert (TRUTH, HIT, MISS) == ((80, 220, 80), (0, 220, 255), (40, 40, 255))
+
+
+def test_frames_nobody_annotated_are_run_and_drawn_unjudged(tmp_path: Path) -> None:
+    images = _rotated_set(tmp_path, []).parent  # the frame f.png and its annotations, which are not read
+
+    class OneBox:
+        def detect(self, image, camera_height_m, focal_px):  # noqa: ANN001, ANN201
+            return Boxes(np.array([[120.0, 40.0, 140.0, 70.0]]), np.array([0.9]))
+
+    [(results, _)] = detect_turned_frames(OneBox(), None, [0.0], images, log=lambda m: None)
+    assert [r.entry.path.name for r in results] == ["f.png"] and not results[0].entry.annotated
+    [written] = write_drawings(results, tmp_path / "drawn", 0.5)
+    picture = cv2.imread(str(written)).astype(int)
+    b, g, r = picture[..., 0], picture[..., 1], picture[..., 2]
+    assert ((b > 200) & (g > 110) & (g < 210) & (r < 100)).any()  # the detection, blue: nothing to judge it by
+    assert not ((r > 150) & (b < 110)).any()  # neither yellow (right) nor red (wrong)
+    assert UNJUDGED == (255, 160, 40)
+    with pytest.raises(ValueError, match="give the annotations, the images' folder, or both"):
+        detect_turned_frames(OneBox(), None, [0.0])

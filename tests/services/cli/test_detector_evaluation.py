@@ -97,3 +97,35 @@ def test_turns_need_rotated_truth(tmp_path: Path, capsys: pytest.CaptureFixture)
     out, err = capsys.readouterr()
     assert f"--turns needs rotated truth boxes ([cx, cy, w, h, degrees]); {ann} has axis-aligned ones" in err
     assert "AP50" not in out  # refused before any frame went through the detector
+
+
+def test_without_annotations_each_frame_is_counted_and_drawn_not_scored(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    images, _ = _frames(tmp_path)
+    cv2.imwrite(str(images / "b.PNG"), cv2.imread(str(images / "a.jpg")))
+    (images / "notes.txt").write_text("not a frame")
+    args = ["evaluate", "--detector", "--images", str(images), "--draw", str(tmp_path / "drawn"), "--json", str(tmp_path / "out.json")]
+    assert main(args) == 0
+    out = capsys.readouterr().out
+    assert "a.jpg: no calibration given; assumed image circle centre (160, 160)" in out
+    assert "a.jpg: 0 people" in out and "b.PNG: 0 people" in out
+    assert "2 images, 0 people as the live detector reports them" in out and "nothing scored: no --annotations" in out
+    assert "AP50" not in out
+    assert json.loads((tmp_path / "out.json").read_text())["people"] == {"a.jpg": 0, "b.PNG": 0}
+    assert sorted(p.name for p in (tmp_path / "drawn").iterdir()) == ["a.jpg", "b.jpg"]
+
+
+@pytest.mark.parametrize(
+    ("setup", "extra", "message"),
+    [("no images", [], "holds no image (.jpg, .jpeg, .png"),
+     ("broken image", [], "cannot read image"),
+     (None, ["--turns", "2"], "--turns scores turned frames against their truth: it needs --annotations FILE")],
+)
+def test_frames_without_annotations_refuse_bad_input_in_one_line(tmp_path: Path, capsys: pytest.CaptureFixture, setup, extra, message) -> None:  # noqa: ANN001
+    images, _ = _frames(tmp_path)
+    if setup == "no images":
+        (images / "a.jpg").unlink()
+    elif setup == "broken image":
+        (images / "c.jpg").write_bytes(b"not a jpeg")
+    assert main(["evaluate", "--detector", "--images", str(images), *extra]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err and len(err.strip().splitlines()) == 1

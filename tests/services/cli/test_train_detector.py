@@ -79,3 +79,52 @@ def test_quantize_with_no_frames_in_the_file_says_so(tmp_path: Path, capsys: pyt
                  "--out", str(out)]) == 2
     assert "has no frames to calibrate on" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_render_eval_draws_its_cameras_from_the_heights_given(tmp_path: Path) -> None:
+    import json
+
+    out = tmp_path / "frames"
+    assert main(["train-detector", "render-eval", "--out", str(out), "--count", "2", "--seed", "5", "--heights", "3", "3.5"]) == 0
+    heights = [im["camera_height_m"] for im in json.loads((out / "annotations.json").read_text())["images"]]
+    assert len(heights) == 2 and all(3.0 <= h <= 3.5 for h in heights)
+
+
+def _tiny_model(path: Path, props: dict[str, str]) -> Path:
+    onnx = pytest.importorskip("onnx")
+    from onnx import TensorProto, helper
+
+    graph = helper.make_graph([helper.make_node("Identity", ["x"], ["y"])], "tiny",
+                              [helper.make_tensor_value_info("x", TensorProto.FLOAT, [1])],
+                              [helper.make_tensor_value_info("y", TensorProto.FLOAT, [1])])  # fmt: skip
+    model = helper.make_model(graph)
+    helper.set_model_props(model, props)
+    onnx.save(model, str(path))
+    return path
+
+
+def test_set_threshold_keeps_it_in_the_file_beside_the_other_keys(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    onnx = pytest.importorskip("onnx")
+    model = _tiny_model(tmp_path / "m.onnx", {"bevflow.zoom": "1.5"})
+    assert main(["train-detector", "set-threshold", "--model", str(model), "--threshold", "0.56"]) == 0
+    assert "reports people scoring at least 0.56" in capsys.readouterr().out
+    props = {p.key: p.value for p in onnx.load(str(model)).metadata_props}
+    assert props == {"bevflow.zoom": "1.5", "bevflow.score_threshold": "0.56"}
+
+
+@pytest.mark.parametrize(
+    ("model", "threshold", "message"),
+    [("missing.onnx", "0.5", "--model {dir}/missing.onnx: no such model file"),
+     ("m.onnx", "1.5", "--threshold must lie between 0 and 1, got 1.5"),
+     ("m.onnx", "0", "--threshold must lie between 0 and 1, got 0"),
+     ("m.onnx", "nan", "--threshold must lie between 0 and 1, got nan"),
+     ("junk.onnx", "0.5", "cannot write the threshold into {dir}/junk.onnx")],
+)
+def test_set_threshold_refuses_and_leaves_the_file_as_it_was(tmp_path: Path, capsys: pytest.CaptureFixture, model: str,
+                                                             threshold: str, message: str) -> None:
+    _tiny_model(tmp_path / "m.onnx", {})
+    (tmp_path / "junk.onnx").write_bytes(b"not a model")
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    assert main(["train-detector", "set-threshold", "--model", str(tmp_path / model), "--threshold", threshold]) == 2
+    assert message.format(dir=tmp_path) in capsys.readouterr().err
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
