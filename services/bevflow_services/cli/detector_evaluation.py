@@ -20,11 +20,10 @@ from typing import TYPE_CHECKING
 
 from bevflow.detect.tiles import RIM_TILES, RimTileDetector, load_rim_tiles
 
-if TYPE_CHECKING:  # ONNX Runtime loads only when a model does
-    from bevflow.detect.runtime import Detector, DetectorBank
-
 from bevflow_services.runtime import UserError
 
+if TYPE_CHECKING:  # the detector's runtime loads when a model does
+    from bevflow.detect.runtime import Detector, DetectorBank
 
 SCORE_FLOOR = 0.05  # scoring keeps every box down to this confidence: AP needs the whole curve
 
@@ -168,4 +167,3 @@ def _run_unannotated(args: argparse.Namespace) -> int:
         except OSError as exc:
             raise UserError(f"cannot write {args.json}: {exc.strerror or exc}") from None
     return 0
-

@@ -83,12 +83,12 @@ class PreparedInput:
 
 
 ZOOM_METADATA_KEY = "bevflow.zoom"
-SCORE_THRESHOLD_METADATA_KEY = "bevflow.score_threshold"
-"""A model's own reporting threshold, in its file: scores of different networks mean different
-things (FastestDet's are objectness^0.6 · class^0.4, the project's model's heatmap peaks), so one
-number does not suit them all. Written by ``bevflow train-detector set-threshold``."""
 """ONNX metadata: the model's input scale as a multiple of ``bevflow.detect.scaling``'s (a model
 trained on renders at ``render --zoom 1.2`` sees a person at the image centre 24 px across)."""
+SCORE_THRESHOLD_METADATA_KEY = "bevflow.score_threshold"
+"""ONNX metadata: the model's own reporting threshold. Scores of different networks mean
+different things (FastestDet's are objectness^0.6 · class^0.4, the project's model's heatmap
+peaks), so one number does not suit them all. Written by ``bevflow train-detector set-threshold``."""
 
 
 class Detector:
@@ -96,7 +96,8 @@ class Detector:
     ``rgb`` and ``input_scale`` say what the model expects (defaults: BGR 0–255 for the
     project's model and YOLOX, RGB 0–1 for YOLOv5/v8, BGR 0–1 for FastestDet). ``zoom``: the frame is resized to this
     multiple of the height-adaptive scale, read from the model file (``ZOOM_METADATA_KEY``,
-    default 1)."""
+    default 1). ``score_threshold``: the lowest score reported; None takes the model file's own
+    (``SCORE_THRESHOLD_METADATA_KEY``), else ``SCORE_THRESHOLD``."""
 
     def __init__(
         self,

@@ -90,26 +90,23 @@ def test_render_eval_draws_its_cameras_from_the_heights_given(tmp_path: Path) ->
     assert len(heights) == 2 and all(3.0 <= h <= 3.5 for h in heights)
 
 
-def _tiny_model(path: Path, props: dict[str, str]) -> Path:
-    onnx = pytest.importorskip("onnx")
-    from onnx import TensorProto, helper
+def _model_copy(path: Path) -> Path:
+    """A shipped model copied to ``path`` (its file keeps no threshold)."""
+    from bevflow.detect.tiles import TILE_MODEL
 
-    graph = helper.make_graph([helper.make_node("Identity", ["x"], ["y"])], "tiny",
-                              [helper.make_tensor_value_info("x", TensorProto.FLOAT, [1])],
-                              [helper.make_tensor_value_info("y", TensorProto.FLOAT, [1])])  # fmt: skip
-    model = helper.make_model(graph)
-    helper.set_model_props(model, props)
-    onnx.save(model, str(path))
+    path.write_bytes(TILE_MODEL.with_name("fastestdet-coco.onnx").read_bytes())
     return path
 
 
-def test_set_threshold_keeps_it_in_the_file_beside_the_other_keys(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
-    onnx = pytest.importorskip("onnx")
-    model = _tiny_model(tmp_path / "m.onnx", {"bevflow.zoom": "1.5"})
+def test_set_threshold_keeps_it_in_the_file_and_the_detector_reads_it(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    from bevflow.detect.runtime import SCORE_THRESHOLD, Detector
+
+    pytest.importorskip("onnx")
+    model = _model_copy(tmp_path / "m.onnx")
+    assert Detector(model, threads=1).score_threshold == SCORE_THRESHOLD
     assert main(["train-detector", "set-threshold", "--model", str(model), "--threshold", "0.56"]) == 0
     assert "reports people scoring at least 0.56" in capsys.readouterr().out
-    props = {p.key: p.value for p in onnx.load(str(model)).metadata_props}
-    assert props == {"bevflow.zoom": "1.5", "bevflow.score_threshold": "0.56"}
+    assert Detector(model, threads=1).score_threshold == 0.56
 
 
 @pytest.mark.parametrize(
@@ -122,7 +119,8 @@ def test_set_threshold_keeps_it_in_the_file_beside_the_other_keys(tmp_path: Path
 )
 def test_set_threshold_refuses_and_leaves_the_file_as_it_was(tmp_path: Path, capsys: pytest.CaptureFixture, model: str,
                                                              threshold: str, message: str) -> None:
-    _tiny_model(tmp_path / "m.onnx", {})
+    pytest.importorskip("onnx")
+    _model_copy(tmp_path / "m.onnx")
     (tmp_path / "junk.onnx").write_bytes(b"not a model")
     before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
     assert main(["train-detector", "set-threshold", "--model", str(tmp_path / model), "--threshold", threshold]) == 2
