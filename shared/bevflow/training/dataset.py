@@ -266,11 +266,11 @@ def render_dataset(folder: Path, count: int, seed: int = 0, shard_size: int = 50
 
 def render_evaluation_set(folder: Path, count: int, seed: int = 1000, zoom: tuple[float, float] = (1.0, 1.4),
                           mix: SceneMix = SceneMix(), heights: tuple[float, float] = MOUNTING_HEIGHTS_M) -> Path:
-    """Render ``count`` whole frames (cameras ``heights`` high, 3–10 m by default) as PNG files plus ``annotations.json``
-    (COCO, with ``camera_height_m`` and ``focal_px`` per image) into ``folder``; frames are
-    ``zoom`` times the detector's input scale, so evaluating them exercises the resize too.
-    Use a seed the training data did not use; ``mix`` as in ``render_sample``. Returns the
-    annotation file."""
+    """Render ``count`` whole frames (cameras ``heights`` high, 3–10 m by default) as PNG files
+    plus ``annotations.json`` (COCO, with ``camera_height_m`` and ``focal_px`` per image) into
+    ``folder``; frames are ``zoom`` times the detector's input scale, so evaluating them
+    exercises the resize too. Use a seed the training data did not use; ``mix`` as in
+    ``render_sample``. Returns the annotation file."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     images, boxes = [], []
