@@ -108,9 +108,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
+from bevflow import matrix2
 from bevflow.camera import Camera
 from bevflow.detections import Cylinders
-from bevflow import matrix2
 from bevflow.metrics.matching import assign_edges, gated_pairs
 
 FloatArray = NDArray[np.float64]
@@ -559,8 +559,9 @@ def _merge(
 
     total_info = total(info)
     moment = total(np.einsum("nij,nj->ni", info, rows.xy))
-    xy = np.linalg.solve(total_info, moment[:, :, None])[:, :, 0]
-    weight = np.sqrt(np.maximum(np.linalg.det(info), 0.0))
+    covariance = matrix2.inverse(total_info)
+    xy = np.einsum("nij,nj->ni", covariance, moment)
+    weight = np.sqrt(np.maximum(matrix2.determinant(info), 0.0))
     total_weight = np.bincount(person, weights=weight, minlength=n_people)
 
     def mean(values: FloatArray) -> FloatArray:
@@ -579,6 +580,6 @@ def _merge(
         camera=camera,
         score=score,
         occluded=~visible,
-        covariance=matrix2.inverse(total_info) if with_covariance else None,
+        covariance=covariance if with_covariance else None,
     )
     return fused, n_views

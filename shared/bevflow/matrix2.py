@@ -21,11 +21,12 @@ def determinant(m: FloatArray) -> FloatArray:
     return result
 
 
-def inverse(m: FloatArray) -> FloatArray:
-    """Inverses of (..., 2, 2) matrices; non-finite where a matrix is singular or not finite."""
+def inverse(m: FloatArray, det: FloatArray | None = None) -> FloatArray:
+    """Inverses of (..., 2, 2) matrices; non-finite where a matrix is singular or not finite.
+    ``det``: their determinants, where the caller has them already."""
     a, b, c, d = m[..., 0, 0], m[..., 0, 1], m[..., 1, 0], m[..., 1, 1]
+    det = determinant(m) if det is None else det
     with np.errstate(invalid="ignore", divide="ignore"):
-        det = a * d - b * c
         inv = np.empty_like(m)
         inv[..., 0, 0], inv[..., 0, 1], inv[..., 1, 0], inv[..., 1, 1] = d / det, -b / det, -c / det, a / det
     return inv

@@ -392,8 +392,9 @@ class Tracker:
             measurement = np.broadcast_to(self.config.measurement_std_m**2 * np.eye(2), (len(det), 2, 2))
         joint = tracks.covariance[track, :2, :2] + measurement
         offset = cylinders.xy[det] - tracks.state[track, :2]
-        d2 = np.einsum("ni,nij,nj->n", offset, inverse(joint), offset)
-        log_det = np.log(determinant(joint))
+        size = determinant(joint)
+        d2 = np.einsum("ni,nij,nj->n", offset, inverse(joint, size), offset)
+        log_det = np.log(size)
         keep = d2 < chi2
         return _Candidates(track[keep], det[keep], pairs.dist[keep], d2[keep], log_det[keep], chi2)
 
