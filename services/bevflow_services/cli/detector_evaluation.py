@@ -15,8 +15,10 @@ from __future__ import annotations
 import argparse
 import json
 import math
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from bevflow.detect.tiles import RIM_TILES, RimTileDetector, load_rim_tiles
 
@@ -93,8 +95,8 @@ def _detector(args: argparse.Namespace, score_threshold: float | None) -> Detect
 
 
 def run_detector_evaluation(args: argparse.Namespace) -> int:
-    from bevflow.detect.coco import CocoError, read_coco
-    from bevflow.detect.runtime import DetectorBank, DetectorError
+    from bevflow.detect.coco import read_coco
+    from bevflow.detect.runtime import DetectorBank
     from bevflow.evaluation.detector import detect_turned_frames, score_frames
     from bevflow.evaluation.drawing import write_drawings
     from bevflow.evaluation.turned import TurnedScores, turn_angles
@@ -102,7 +104,7 @@ def run_detector_evaluation(args: argparse.Namespace) -> int:
     _check(args)
     if args.annotations is None:
         return _run_unannotated(args)
-    try:
+    with _user_errors():
         if args.turns > 1 and not all(e.oriented for e in read_coco(args.annotations, args.images)):
             raise UserError(f"--turns needs rotated truth boxes ([cx, cy, w, h, degrees]); {args.annotations} has axis-aligned ones")
         detector = _detector(args, SCORE_FLOOR)  # every detection scored: AP needs the whole precision-recall curve
@@ -114,10 +116,6 @@ def run_detector_evaluation(args: argparse.Namespace) -> int:
         drawn = write_drawings(results, args.draw, scores.threshold) if args.draw is not None else []
         turned = [scores.as_dict()] + [score_frames(*turn).as_dict() for turn in per_turn[1:]]
         spread = TurnedScores.of(degrees, turned) if args.turns > 1 else None
-    except (DetectorError, CocoError, FileNotFoundError) as exc:
-        raise UserError(str(exc)) from None
-    except OSError as exc:
-        raise UserError(f"cannot write the drawings: {exc}") from None
     print(f"{scores.images} images, {scores.annotations} people, {scores.detections} detections, "
           f"{scores.ms_per_frame:.1f} ms per frame")  # fmt: skip
     print(f"AP50 {scores.AP50:.3f}  AP50_rotated {scores.AP50_rotated:.3f}  precision {scores.precision:.3f}  "
@@ -130,29 +128,20 @@ def run_detector_evaluation(args: argparse.Namespace) -> int:
     if isinstance(detector, DetectorBank):
         print(f"models by camera height: {detector.describe()}")
     if args.json is not None:
-        try:
-            args.json.write_text(json.dumps(scores.as_dict() | ({} if spread is None else {"turned": spread.as_dict()}), indent=2) + "\n")
-        except OSError as exc:
-            raise UserError(f"cannot write {args.json}: {exc.strerror or exc}") from None
+        _write_json(args.json, scores.as_dict() | ({} if spread is None else {"turned": spread.as_dict()}))
     return 0
 
 
 def _run_unannotated(args: argparse.Namespace) -> int:
     """Every image of ``--images`` through the detector as it runs live: each frame's people
     counted, printed, drawn (``--draw``) and written (``--json``); nothing scored."""
-    from bevflow.detect.coco import CocoError
-    from bevflow.detect.runtime import DetectorError
     from bevflow.evaluation.detector import detect_turned_frames
     from bevflow.evaluation.drawing import write_drawings
 
-    try:
+    with _user_errors():
         [(results, ms)] = detect_turned_frames(_detector(args, None), None, [0.0], args.images,
                                               args.camera_height, args.focal, args.scale, log=print)  # fmt: skip
         drawn = write_drawings(results, args.draw, 0.0) if args.draw is not None else []  # all the detector reported
-    except (DetectorError, CocoError, FileNotFoundError) as exc:
-        raise UserError(str(exc)) from None
-    except OSError as exc:
-        raise UserError(f"cannot write the drawings: {exc}") from None
     people = {r.entry.path.name: len(r.confidence) for r in results}
     for name, count in people.items():
         print(f"{name}: {count} {'person' if count == 1 else 'people'}")
@@ -161,9 +150,27 @@ def _run_unannotated(args: argparse.Namespace) -> int:
     if drawn:
         print(f"drew {len(drawn)} frames into {args.draw}")
     if args.json is not None:
-        doc = {"images": len(results), "ms_per_frame": ms, "people": people}
-        try:
-            args.json.write_text(json.dumps(doc, indent=2) + "\n")
-        except OSError as exc:
-            raise UserError(f"cannot write {args.json}: {exc.strerror or exc}") from None
+        _write_json(args.json, {"images": len(results), "ms_per_frame": ms, "people": people})
     return 0
+
+
+@contextmanager
+def _user_errors() -> Iterator[None]:
+    """Frames, annotations or models that cannot be read, and drawings that cannot be written, as
+    one line for the user."""
+    from bevflow.detect.coco import CocoError
+    from bevflow.detect.runtime import DetectorError
+
+    try:
+        yield
+    except (DetectorError, CocoError, FileNotFoundError) as exc:
+        raise UserError(str(exc)) from None
+    except OSError as exc:
+        raise UserError(f"cannot write the drawings: {exc}") from None
+
+
+def _write_json(path: Path, doc: dict[str, Any]) -> None:
+    try:
+        path.write_text(json.dumps(doc, indent=2) + "\n")
+    except OSError as exc:
+        raise UserError(f"cannot write {path}: {exc.strerror or exc}") from None
