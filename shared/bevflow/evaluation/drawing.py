@@ -5,10 +5,16 @@ threshold in yellow where they match a person (rotated IoU ≥ 0.5, as ``AP50_ro
 red where they match nobody, each with its score; a cross marks the image circle's centre that
 radial angles were taken about. On a frame nobody annotated there is nothing to judge by: its
 detections are drawn in blue.
+
+Each drawing is named after its image's path below the images' common folder, so frames of one
+name in different folders (``cam1/0001.jpg``, ``cam2/0001.jpg``) or of one stem in one folder
+(``a.jpg``, ``a.png``) never overwrite each other (``drawing_names``).
 """
 
 from __future__ import annotations
 
+import os
+from collections import Counter
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -49,13 +55,25 @@ def _polygons(image: NDArray[np.uint8], rotated: NDArray[np.float64], colour: tu
 
 
 def write_drawings(results: Sequence[FrameResult], folder: Path, threshold: float) -> list[Path]:
-    """Draw every frame into ``folder`` as ``<image name>.jpg``; returns the files written."""
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    written = []
-    for r in results:
-        path = folder / f"{r.entry.path.stem}.jpg"
+    """Draw every frame into ``folder``, each under its own name (``drawing_names``); returns the
+    files written."""
+    written = [Path(folder) / name for name in drawing_names([r.entry.path for r in results])]
+    for r, path in zip(results, written, strict=True):
+        path.parent.mkdir(parents=True, exist_ok=True)
         if not cv2.imwrite(str(path), draw_frame(read_image(r.entry.path), r, threshold)):
             raise OSError(f"cannot write {path}")
-        written.append(path)
     return written
+
+
+def drawing_names(images: Sequence[Path]) -> list[Path]:
+    """Where each image's drawing goes, relative to the drawings' folder: the image's path below
+    the images' common folder as a JPEG (``cam1/0001.png`` → ``cam1/0001.jpg``); where two images
+    would share that name (``a.jpg`` and ``a.png``), each keeps its own suffix (``a.jpg.jpg``,
+    ``a.png.jpg``)."""
+    paths = [Path(p).resolve() for p in images]
+    if not paths:
+        return []
+    below = [p.relative_to(os.path.commonpath([q.parent for q in paths])) for p in paths]
+    plain = [p.with_suffix(".jpg") for p in below]
+    shared = Counter(plain)
+    return [name if shared[name] == 1 else p.with_name(p.name + ".jpg") for name, p in zip(plain, below, strict=True)]
