@@ -87,7 +87,10 @@ class CameraConfig(_Strict):
     extrinsics: Extrinsics | None = None
     monitored_radius_m: PositiveFloat | None = None
     source: str | None = Field(default=None, description="stream URL, video file or image folder")
-    detector: str | None = Field(default=None, description="detector model name; default by height")
+    detector: str | None = Field(
+        default=None,
+        description="detector model name (an ONNX file, a shipped model, rim-tiles or rim-tiles:MODEL); default by height",
+    )
 
     @field_validator("distortion")
     @classmethod
@@ -281,8 +284,9 @@ class BusSecurity(_Strict):
 
 class DetectorRange(_Strict):
     """Cameras mounted from ``min_height_m`` (inclusive) to ``max_height_m`` (exclusive) that name
-    no ``detector`` of their own use ``model``: an ONNX file (relative to the site file) or the
-    name of a model shipped with bevflow."""
+    no ``detector`` of their own use ``model``: an ONNX file (relative to the site file), the
+    name of a model shipped with bevflow, ``rim-tiles``, or ``rim-tiles:MODEL`` (rim tiles with
+    MODEL on the tiles)."""
 
     min_height_m: Annotated[float, Field(ge=0)] = 0.0
     max_height_m: PositiveFloat

@@ -20,7 +20,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from bevflow.detect.tiles import RIM_TILES, RimTileDetector, load_rim_tiles
+from bevflow.detect.tiles import RIM_TILES, RimTileDetector, is_rim_tiles, load_rim_tiles, rim_tiles_model
 
 from bevflow_services.runtime import UserError
 
@@ -36,7 +36,7 @@ def add_detector_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--detector", action="store_true", help="run the real person detector on images instead of using annotated boxes")
     group.add_argument("--model", type=Path, metavar="MODEL",
                        help="the ONNX detector (a file or a shipped model's name, e.g. bevflow-person-centernet-int8), or 'rim-tiles': rim tiles turned upright through a detector trained on "
-                       "photographs (default: what a site gets, by each frame's camera height: rim-tiles under 5 m, "
+                       "photographs ('rim-tiles:MODEL' runs MODEL on them, as --tile-model does) (default: what a site gets, by each frame's camera height: rim-tiles under 5 m, "
                        "the shipped general model from 5 m)")  # fmt: skip
     group.add_argument("--tile-model", type=Path, metavar="MODEL",
                        help="with rim-tiles: the ONNX model run on the tiles, a file or a shipped model's name (default: the shipped FastestDet, "
@@ -71,10 +71,10 @@ def _check(args: argparse.Namespace) -> None:
     if args.threads <= 0:
         raise UserError(f"--threads must be positive, got {args.threads}")
     if args.tile_model is not None and str(args.model) != RIM_TILES:
-        raise UserError("--tile-model goes with --model rim-tiles")
+        raise UserError("--tile-model goes with --model rim-tiles" + (" (or --model rim-tiles:MODEL alone)" if is_rim_tiles(args.model) else ""))
     if args.turns < 1:
         raise UserError(f"--turns must be a number of turns >= 1, got {args.turns}")
-    if str(args.model) == RIM_TILES and args.scale is not None:
+    if is_rim_tiles(args.model) and args.scale is not None:
         raise UserError("--model rim-tiles sizes its tiles from the focal length: give --camera-height and --focal, or neither, not --scale")
 
 
@@ -85,8 +85,12 @@ def _detector(args: argparse.Namespace, score_threshold: float | None) -> Detect
 
     from bevflow_services.detector.models import resolve_model
 
-    if str(args.model) == RIM_TILES:
-        tiles = resolve_model(args.tile_model) if args.tile_model is not None else None
+    if is_rim_tiles(args.model):
+        try:
+            named = args.tile_model or rim_tiles_model(str(args.model))
+        except ValueError as e:
+            raise UserError(str(e)) from None
+        tiles = resolve_model(named) if named is not None else None
         return load_rim_tiles(threads=args.threads, tile_model=tiles, score_threshold=score_threshold)
     if args.model is None and args.scale is None:  # each frame gets the model of its (assumed) height
         return DetectorBank(DEFAULT_RANGES, threads=args.threads, score_threshold=score_threshold)

@@ -1,5 +1,5 @@
 """Detector speed at the scaled input of cameras at given heights: ``python -m
-bevflow.detect.benchmark [--model PATH | --model rim-tiles] [--heights 3.3 8.1] [--threads 1 2] [--repeats 30]``.
+bevflow.detect.benchmark [--model PATH | --model rim-tiles | --model rim-tiles:PATH] [--heights 3.3 8.1] [--threads 1 2] [--repeats 30]``.
 
 Prints, per height and thread count, the model input size and the median and 90th-percentile
 milliseconds of ``Detector.detect`` on a rendered frame (resize + inference + decoding + NMS).
@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from bevflow.camera import FisheyeCamera
 from bevflow.detect.runtime import Detector
 from bevflow.detect.scaling import scaled_focal
-from bevflow.detect.tiles import RIM_TILES, RimTileDetector, load_rim_tiles
+from bevflow.detect.tiles import RimTileDetector, is_rim_tiles, load_rim_tiles, rim_tiles_model
 from bevflow.sim.bodies import BodyShape, pose_bodies
 from bevflow.sim.render import FisheyeRenderer, Room
 
@@ -40,7 +40,7 @@ def rendered_frame(height: float, people: int = 15, zoom: float = 1.5, seed: int
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0], formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--model", type=Path, help="ONNX model (default: the shipped one), or rim-tiles (bevflow.detect.tiles)")
+    parser.add_argument("--model", type=Path, help="ONNX model (default: the shipped one), or rim-tiles or rim-tiles:PATH (bevflow.detect.tiles)")
     parser.add_argument("--heights", type=float, nargs="+", default=[3.3, 8.1])
     parser.add_argument("--threads", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--repeats", type=int, default=30)
@@ -67,8 +67,8 @@ def _detector(
     model: Path | None, threads: int, frame: NDArray[np.uint8], height: float, focal: float
 ) -> tuple[Detector | RimTileDetector, str]:
     """The detector to time and a description of its input."""
-    if str(model) == RIM_TILES:
-        tiles = load_rim_tiles(threads=threads)
+    if is_rim_tiles(model):
+        tiles = load_rim_tiles(threads=threads, tile_model=rim_tiles_model(str(model)))
         return tiles, f"{tiles.layout.tiles} tiles of {tiles.input_px}x{tiles.input_px}"
     det = Detector(model, threads=threads)
     shape = det.prepare(frame, det.scale_for(height, focal)).tensor.shape

@@ -35,7 +35,7 @@ from bevflow.detect.decoders import FORMATS, decode_centernet, decode_fastestdet
 from bevflow.detect.providers import DEFAULT_PROVIDERS, check_providers, plan_providers
 from bevflow.detect.rotated import radial_boxes
 from bevflow.detect.scaling import scale_factor
-from bevflow.detect.tiles import RIM_TILES, RimTileDetector, load_rim_tiles
+from bevflow.detect.tiles import RIM_TILES, RimTileDetector, is_rim_tiles, load_rim_tiles, rim_tiles_model
 from bevflow.detections import SAME_PERSON_IOU, Boxes, nms
 
 _log = logging.getLogger(__name__)
@@ -363,12 +363,12 @@ class DetectorBank:
         parts = []
         for r in self.ranges:
             span = f"under {r.max_m:g} m" if r.min_m <= 0 else f"from {r.min_m:g} m" if r.max_m >= 100 else f"{r.min_m:g}-{r.max_m:g} m"
-            parts.append(f"{span}: {r.model if str(r.model) == RIM_TILES else Path(r.model or DEFAULT_MODEL).stem}")
+            parts.append(f"{span}: {r.model if is_rim_tiles(r.model) else Path(r.model or DEFAULT_MODEL).stem}")
         return "; ".join(parts)
 
     def _load(self, model: str | Path | None) -> Detector | RimTileDetector:
-        if str(model) == RIM_TILES:
-            return load_rim_tiles(self.threads, **self.options)
+        if is_rim_tiles(model):
+            return load_rim_tiles(self.threads, rim_tiles_model(str(model)), **self.options)
         return Detector(model, self.threads, **self.options)
 
 

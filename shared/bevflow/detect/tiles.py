@@ -116,6 +116,13 @@ class RimTileDetector:
         self.centre_share, self.half_view = centre_share, math.radians(field_of_view_deg / 2)
         self.input_px = int(hw[0])
 
+    @property
+    def name(self) -> str:
+        """How a site file names this detector: ``rim-tiles``, or ``rim-tiles:MODEL`` (the tile
+        model's file name without ``.onnx``) where the tiles run another model than ``TILE_MODEL``."""
+        path = getattr(self.tile_detector, "model_path", None)
+        return RIM_TILES if path is None or Path(path).resolve() == TILE_MODEL else f"{RIM_TILES}:{Path(path).stem}"
+
     def detect(self, image_bgr: NDArray[np.uint8], camera_height_m: float, focal_px: float,
                centre: tuple[float, float] | None = None) -> Boxes:  # fmt: skip
         """Person boxes as the pipeline takes them (``detect_boxes``). ``centre``: the point people
@@ -243,13 +250,35 @@ def tile_affine(theta: float, centre: tuple[float, float], radius: float, layout
 
 
 RIM_TILES = "rim-tiles"
-"""The name that selects this detector wherever a model is named (site file, ``--model``)."""
+"""The name that selects this detector wherever a model is named (site file, ``--model``);
+``rim-tiles:MODEL`` runs MODEL on the tiles instead of ``TILE_MODEL`` (``rim_tiles_model``)."""
 TILE_MODEL = Path(__file__).resolve().parent.parent / "data" / "models" / "fastestdet-tiles.onnx"
 """FastestDet's COCO weights moved a quarter of the way toward a fine-tune on our rendered tiles
 (BSD-3-Clause, see the model card): as good on real frames turned every way as the COCO weights
 (``fastestdet-coco.onnx``, also shipped), better on renders. A tile costs a third to a quarter of
 what YOLOX-nano (``yolox-nano-coco.onnx``, also shipped, more accurate on real frames) costs."""
 CENTRE_MODEL = TILE_MODEL.with_name("bevflow-person-centernet.onnx")
+
+
+def is_rim_tiles(name: str | Path | None) -> bool:
+    """Whether a model name asks for the rim tiles: ``rim-tiles`` or ``rim-tiles:MODEL``."""
+    return name is not None and (str(name) == RIM_TILES or str(name).startswith(f"{RIM_TILES}:"))
+
+
+def rim_tiles_model(name: str | Path) -> str | None:
+    """The tile model a rim-tiles name asks for: MODEL of ``rim-tiles:MODEL`` (a model file, or
+    where models are named in a site file a shipped model's name, e.g. ``yolox-nano-coco``), None
+    for ``rim-tiles`` (``TILE_MODEL``). ValueError for a name that asks for no rim tiles or for
+    ``rim-tiles:`` with no model after it."""
+    if not is_rim_tiles(name):
+        raise ValueError(f"{name!r} does not name the rim tiles ({RIM_TILES} or {RIM_TILES}:MODEL)")
+    text = str(name)
+    if text == RIM_TILES:
+        return None
+    model = text.removeprefix(f"{RIM_TILES}:").strip()
+    if not model:
+        raise ValueError(f"{text!r} names no tile model: write {RIM_TILES}:MODEL, e.g. {RIM_TILES}:yolox-nano-coco")
+    return model
 
 
 def rim_tiles(model: Callable[[Path, int], Detector], threads: int, tile_model: str | Path | None = None) -> RimTileDetector:

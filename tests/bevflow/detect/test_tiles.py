@@ -13,7 +13,16 @@ import pytest
 
 from bevflow.detect.coco import rotated_to_xyxy
 from bevflow.detect.rotated import outline_xyxy, rotated_corners, rotated_iou_matrix
-from bevflow.detect.tiles import RIM_TILES, TILE_MODEL, RimTileDetector, TileLayout, prefiltered, rotated_nms
+from bevflow.detect.tiles import (
+    RIM_TILES,
+    TILE_MODEL,
+    RimTileDetector,
+    TileLayout,
+    is_rim_tiles,
+    prefiltered,
+    rim_tiles_model,
+    rotated_nms,
+)
 from bevflow.detections import Boxes
 
 RADIUS = 200.0
@@ -134,6 +143,36 @@ def test_the_shipped_tile_model_is_named() -> None:
     assert RIM_TILES == "rim-tiles" and TILE_MODEL.name == "fastestdet-tiles.onnx" and TILE_MODEL.is_file()
     for model in ("fastestdet-tiles", "fastestdet-coco", "yolox-nano-coco"):  # each ships under its own licence
         assert (TILE_MODEL.parent / f"LICENSE-{model}.txt").is_file() and f"{model}.onnx" in (ROOT / "NOTICE").read_text()
+
+
+@pytest.mark.parametrize(
+    ("name", "rim_tiles", "tile_model"),
+    [
+        ("rim-tiles", True, None),  # the shipped TILE_MODEL
+        ("rim-tiles:yolox-nano-coco", True, "yolox-nano-coco"),
+        ("rim-tiles:models/mine.onnx", True, "models/mine.onnx"),
+        ("rim-tiles: yolox-nano-coco ", True, "yolox-nano-coco"),
+        ("rim-tilesx", False, ValueError),
+        ("bevflow-person-centernet", False, ValueError),
+        (None, False, ValueError),
+        ("rim-tiles:", True, ValueError),  # names no tile model
+        ("rim-tiles: ", True, ValueError),
+    ],
+)
+def test_a_model_name_asks_for_rim_tiles_and_names_their_model(name: str | None, rim_tiles: bool, tile_model: str | type | None) -> None:
+    assert is_rim_tiles(name) is rim_tiles
+    if tile_model is ValueError:
+        with pytest.raises(ValueError, match="names no tile model|does not name the rim tiles"):
+            rim_tiles_model(str(name))
+    else:
+        assert rim_tiles_model(str(name)) == tile_model
+
+
+@pytest.mark.parametrize(("model", "name"), [(TILE_MODEL, "rim-tiles"), (TILE_MODEL.with_name("yolox-nano-coco.onnx"), "rim-tiles:yolox-nano-coco")])
+def test_rim_tiles_say_how_a_site_file_names_them(model: Path, name: str) -> None:
+    tiles = UprightBlobs()
+    tiles.model_path = model  # type: ignore[attr-defined]
+    assert RimTileDetector(tiles).name == name  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize("workers", [2, 3, 8, 9])

@@ -56,7 +56,12 @@ def test_given_calibration_is_used_and_nothing_is_assumed(tmp_path: Path, capsys
      (["--model", "rim-tiles", "--scale", "0.5"], "--model rim-tiles sizes its tiles from the focal length"),
      (["--tile-model", "x.onnx"], "--tile-model goes with --model rim-tiles"),
      (["--model", "nope"], "detector model 'nope' is neither an ONNX file nor a shipped model (shipped: "),
-     (["--model", "rim-tiles", "--tile-model", "nope"], "detector model 'nope' is neither")],
+     (["--model", "rim-tiles", "--tile-model", "nope"], "detector model 'nope' is neither"),
+     (["--model", "rim-tiles:nope"], "detector model 'nope' is neither"),
+     (["--model", "rim-tiles:"], "'rim-tiles:' names no tile model: write rim-tiles:MODEL"),
+     (["--model", "rim-tiles:yolox-nano-coco", "--tile-model", "yolox-nano-coco"],
+      "--tile-model goes with --model rim-tiles (or --model rim-tiles:MODEL alone)"),
+     (["--model", "rim-tiles:yolox-nano-coco", "--scale", "0.5"], "--model rim-tiles sizes its tiles from the focal length")],
 )
 def test_bad_options_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture, extra: list[str], message: str) -> None:
     images, ann = _frames(tmp_path)
@@ -71,7 +76,8 @@ def test_rim_tiles_runs_on_the_same_frames(tmp_path: Path, capsys: pytest.Captur
 
 
 @pytest.mark.parametrize("model", [["--model", "bevflow-person-centernet-int8", "--scale", "1"],
-                                   ["--model", "rim-tiles", "--tile-model", "yolox-nano-coco"]])
+                                   ["--model", "rim-tiles", "--tile-model", "yolox-nano-coco"],
+                                   ["--model", "rim-tiles:yolox-nano-coco"]])
 def test_a_shipped_model_is_named_as_in_a_site_file(tmp_path: Path, capsys: pytest.CaptureFixture, model: list[str]) -> None:
     images, ann = _frames(tmp_path)
     assert main(["evaluate", "--detector", *model, "--images", str(images), "--annotations", str(ann)]) == 0

@@ -164,6 +164,25 @@ def test_rim_tiles_names_the_rotation_aware_detector_shared_by_the_cameras_askin
     assert models.runs_on()["own"] == ("rim-tiles", "OpenVINOExecutionProvider")  # the provider actually used
 
 
+def test_rim_tiles_with_another_tile_model_are_a_detector_of_their_own(tmp_path: Path) -> None:
+    site = parse_site((SITE % "rim-tiles:yolox-nano-coco") + "detectors: [{min_height_m: 0, max_height_m: 100, model: rim-tiles}]\n")
+    models = CameraModels(site, site_dir=tmp_path, load=FakeTileDetector)
+    assert isinstance(models["own"], RimTileDetector) and models["low"] is models["high"] is not models["own"]
+    assert models["own"].tile_detector.model_path == TILE_MODEL.with_name("yolox-nano-coco.onnx")
+    assert models["own"].centre is models["low"].centre  # one general model under both
+    assert models.models() == {"low": "rim-tiles", "high": "rim-tiles", "own": "rim-tiles:yolox-nano-coco"}
+
+
+@pytest.mark.parametrize(
+    ("name", "message"),
+    [("rim-tiles:nope", "detector model 'nope' is neither an ONNX file nor a shipped model"),
+     ("'rim-tiles:'", "'rim-tiles:' names no tile model: write rim-tiles:MODEL")],
+)
+def test_rim_tiles_with_no_such_tile_model_fail_at_start(tmp_path: Path, name: str, message: str) -> None:
+    with pytest.raises(DetectorError, match=message):
+        CameraModels(parse_site(SITE % name), site_dir=tmp_path, load=FakeTileDetector)
+
+
 @pytest.mark.parametrize(
     ("line", "expected"),
     [("", ["cpu"]), ("detector_providers: [OpenVINO, cpu]\n", ["openvino", "cpu"]),
