@@ -70,7 +70,7 @@ def drawing_names(images: Sequence[Path]) -> list[Path]:
     the images' common folder as a JPEG (``cam1/0001.png`` → ``cam1/0001.jpg``); where two images
     would share that name (``a.jpg`` and ``a.png``), each keeps its own suffix (``a.jpg.jpg``,
     ``a.png.jpg``)."""
-    paths = [Path(p).resolve() for p in images]
+    paths = [Path(os.path.abspath(p)) for p in images]  # not resolved: a linked frame keeps the link's name
     if not paths:
         return []
     below = [p.relative_to(os.path.commonpath([q.parent for q in paths])) for p in paths]

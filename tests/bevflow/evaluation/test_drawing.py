@@ -29,6 +29,16 @@ def test_each_image_gets_a_drawing_of_its_own(tmp_path: Path, images: list[str],
     assert drawing_names([tmp_path / "frames" / i for i in images]) == [Path(n) for n in names]
 
 
+def test_a_linked_frame_is_drawn_under_the_links_name(tmp_path: Path) -> None:
+    for camera in ("x", "y"):
+        (tmp_path / "data" / camera).mkdir(parents=True)
+        (tmp_path / "data" / camera / "0001.jpg").write_bytes(b"")
+    (tmp_path / "frames").mkdir()
+    (tmp_path / "frames" / "a.jpg").symlink_to(tmp_path / "data" / "x" / "0001.jpg")
+    (tmp_path / "frames" / "b.jpg").symlink_to(tmp_path / "data" / "y" / "0001.jpg")
+    assert drawing_names([tmp_path / "frames" / "a.jpg", tmp_path / "frames" / "b.jpg"]) == [Path("a.jpg"), Path("b.jpg")]
+
+
 def test_frames_of_one_stem_are_drawn_apart(tmp_path: Path) -> None:
     frames = tmp_path / "frames"
     frames.mkdir()
