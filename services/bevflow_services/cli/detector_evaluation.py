@@ -42,7 +42,8 @@ def add_detector_arguments(parser: argparse.ArgumentParser) -> None:
                        help="with rim-tiles: the ONNX model run on the tiles, a file or a shipped model's name (default: the shipped FastestDet, "
                        "fastestdet-tiles; fastestdet-coco is its COCO weights as published, yolox-nano-coco more accurate and slower)")  # fmt: skip
     group.add_argument("--annotations", type=Path, metavar="FILE",
-                       help="COCO JSON of the --images: bbox [x,y,w,h] or rotated [cx,cy,w,h,deg]; without it nothing is "
+                       help="COCO JSON of the --images: bbox [x,y,w,h] or rotated [cx,cy,w,h,deg] (iscrowd 1: a crowd region, where "
+                       "detections count for nothing, as in COCO); without it nothing is "
                        "scored: each image's people are counted (and drawn with --draw) as the live detector reports them")  # fmt: skip
     group.add_argument("--threads", type=int, default=2, metavar="N", help="ONNX Runtime threads (default 2)")
     group.add_argument("--camera-height", type=float, metavar="M", help="camera height for images without 'camera_height_m' (with --focal)")

@@ -6,12 +6,16 @@ rotated box counts as its enclosing axis-aligned rectangle wherever axis-aligned
 compared (the detector's boxes are axis-aligned, the paper's D). Images may carry
 ``camera_height_m`` and ``focal_px`` for height-adaptive scaling. A folder of frames nobody
 annotated (``unannotated_images``) is read as images whose people are not known.
+
+A person annotation with ``iscrowd`` 1 is a crowd region, as in COCO: one box over people not
+boxed one by one. It is not a person to find; scoring ignores detections that lie in it
+(``bevflow.evaluation.detector``).
 """
 
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -35,10 +39,16 @@ class CocoImage:
     focal_px: float | None = None
     oriented: bool = False  # whether the file gave angles ([cx, cy, w, h, deg] boxes)
     annotated: bool = True  # False: nobody annotated the frame (``rotated`` is empty: not known)
+    crowd: FloatArray = field(default_factory=lambda: np.zeros((0, 5)))  # (M, 5) crowd regions (``iscrowd`` 1)
 
     @property
     def xyxy(self) -> FloatArray:
         return rotated_to_xyxy(self.rotated)
+
+    @property
+    def crowd_xyxy(self) -> FloatArray:
+        """The crowd regions as the upright boxes enclosing them: a region, not a body."""
+        return rotated_to_xyxy(self.crowd)
 
 
 class CocoError(ValueError):
@@ -57,6 +67,7 @@ class _Annotation(BaseModel):
     image_id: int | str
     category_id: int | str | None = None
     bbox: list[Finite] = Field(min_length=4, max_length=5)
+    iscrowd: Annotated[int, Field(ge=0, le=1)] = 0
 
 
 class _Category(BaseModel):
@@ -92,12 +103,14 @@ def _parse(annotations: Path) -> _CocoFile:
 def read_coco(annotations: Path, images_dir: Path | None = None) -> list[CocoImage]:
     """Person boxes per image from a COCO JSON file. ``bbox`` of 4 numbers is [x, y, w, h]; of 5,
     the rotated [cx, cy, w, h, degrees]. Images without annotations are kept (no people).
-    Optional per-image keys ``camera_height_m`` and ``focal_px`` enable height-adaptive scaling."""
+    Optional per-image keys ``camera_height_m`` and ``focal_px`` enable height-adaptive scaling.
+    Annotations with ``iscrowd`` 1 are the image's crowd regions, not people (module docstring)."""
     doc = _parse(annotations)
     cats = doc.categories
     person = {c.id for c in cats if c.name.lower() == "person"} or ({c.id for c in cats} if len(cats) == 1 else None)
     folder = Path(images_dir) if images_dir is not None else Path(annotations).parent
     boxes: dict[int | str, list[list[float]]] = {im.id: [] for im in doc.images}
+    crowds: dict[int | str, list[list[float]]] = {im.id: [] for im in doc.images}
     oriented = False
     for ann in doc.annotations:
         if person is not None and ann.category_id not in person:
@@ -109,12 +122,12 @@ def read_coco(annotations: Path, images_dir: Path | None = None) -> list[CocoIma
             oriented = True
         if ann.image_id not in boxes:
             raise CocoError(f"{annotations}: annotation {ann.id} refers to unknown image {ann.image_id!r}")
-        boxes[ann.image_id].append(b)
+        (crowds if ann.iscrowd else boxes)[ann.image_id].append(b)
     # A file of rotated boxes is oriented as a whole, so an image whose people all happen to lie
     # at 0° is scored as rotated like the rest.
     return [
         CocoImage(folder / im.file_name, np.array(boxes[im.id], dtype=np.float64).reshape(-1, 5),
-                  im.camera_height_m, im.focal_px, oriented)
+                  im.camera_height_m, im.focal_px, oriented, crowd=np.array(crowds[im.id], dtype=np.float64).reshape(-1, 5))
         for im in doc.images
     ]  # fmt: skip
 

@@ -14,6 +14,10 @@ same rotated box, and about what an annotator drawing upright boxes would draw.
 radial angle about the image circle's centre, sized so that its enclosing box is the detection.
 For annotation files without angles both sides stay axis-aligned and it equals AP50.
 
+Crowd regions (COCO's ``iscrowd`` 1, ``bevflow.detect.coco``) are scored as COCO does: they are not
+people to find, and a detection that matches nobody but lies mostly inside one (at least half its
+area, against the region's enclosing upright box) counts neither for nor against the detector.
+
 >>> gt = [np.array([[0.0, 0.0, 10.0, 10.0]])]
 >>> s = score_boxes([np.array([[1.0, 0.0, 10.0, 10.0], [50.0, 50.0, 60.0, 60.0]])], [np.array([0.9, 0.3])], gt)
 >>> round(s.AP50, 3), round(s.precision, 3), round(s.recall, 3), round(s.F1, 3)
@@ -66,11 +70,17 @@ class DetectorScores:
 def iou_matrix(a: FloatArray, b: FloatArray) -> FloatArray:
     """(P, 4) × (Q, 4) xyxy → (P, Q) intersection over union."""
     a, b = np.asarray(a, np.float64).reshape(-1, 4), np.asarray(b, np.float64).reshape(-1, 4)
-    w = np.clip(np.minimum(a[:, None, 2], b[None, :, 2]) - np.maximum(a[:, None, 0], b[None, :, 0]), 0, None)
-    h = np.clip(np.minimum(a[:, None, 3], b[None, :, 3]) - np.maximum(a[:, None, 1], b[None, :, 1]), 0, None)
-    inter = w * h
+    inter = _intersection(a, b)
     iou: FloatArray = inter / np.maximum(_area(a)[:, None] + _area(b)[None, :] - inter, 1e-12)
     return iou
+
+
+def _intersection(a: FloatArray, b: FloatArray) -> FloatArray:
+    """(P, 4) × (Q, 4) xyxy → (P, Q) areas of overlap."""
+    w = np.clip(np.minimum(a[:, None, 2], b[None, :, 2]) - np.maximum(a[:, None, 0], b[None, :, 0]), 0, None)
+    h = np.clip(np.minimum(a[:, None, 3], b[None, :, 3]) - np.maximum(a[:, None, 1], b[None, :, 1]), 0, None)
+    inter: FloatArray = w * h
+    return inter
 
 
 def _area(xyxy: FloatArray) -> FloatArray:
@@ -94,6 +104,16 @@ def match_by_iou(iou: FloatArray, scores: FloatArray, iou_threshold: float = 0.5
             free[j] = False
             tp[order[k]] = True
     return tp
+
+
+def in_crowd(xyxy: FloatArray, crowd: FloatArray, share: float = 0.5) -> NDArray[np.bool_]:
+    """Whether each detection (P, 4) lies at least ``share`` of its area inside one of the crowd
+    regions (M, 4), as COCO judges detections against ``iscrowd`` regions."""
+    a, b = np.asarray(xyxy, np.float64).reshape(-1, 4), np.asarray(crowd, np.float64).reshape(-1, 4)
+    if not len(a) or not len(b):
+        return np.zeros(len(a), dtype=bool)
+    inside: NDArray[np.bool_] = (_intersection(a, b) / np.maximum(_area(a), 1e-12)[:, None]).max(axis=1) >= share
+    return inside
 
 
 def match_image(xyxy: FloatArray, scores: FloatArray, truth: FloatArray, iou_threshold: float = 0.5) -> NDArray[np.bool_]:
@@ -139,24 +159,35 @@ def score_boxes(
     iou_threshold: float = 0.5,
     rotated_detections: Sequence[FloatArray] | None = None,
     rotated_truth: Sequence[FloatArray] | None = None,
+    crowd: Sequence[FloatArray] | None = None,
 ) -> DetectorScores:
     """Score per-image detections (xyxy, scores) against per-image ground truth (xyxy). With
     ``rotated_detections`` and ``rotated_truth`` ((N, 5) per image, ``bevflow.detect.rotated``)
-    ``AP50_rotated`` matches those instead; without them it is the axis-aligned AP50."""
+    ``AP50_rotated`` matches those instead; without them it is the axis-aligned AP50. ``crowd``:
+    each image's crowd regions (xyxy), where unmatched detections are ignored (module docstring)."""
     if not (len(detections) == len(scores) == len(truth)):
         raise ValueError("detections, scores and truth need one entry per image")
     truth = [np.asarray(t, np.float64).reshape(-1, 4) for t in truth]
     n_truth = int(sum(len(t) for t in truth))
-    aligned = _curve([match_image(d, s, t, iou_threshold) for d, s, t in zip(detections, scores, truth, strict=True)], scores, n_truth)
+    crowded = [in_crowd(d, c) for d, c in zip(detections, crowd or [np.zeros((0, 4))] * len(truth), strict=True)]
+    hits = [match_image(d, s, t, iou_threshold) for d, s, t in zip(detections, scores, truth, strict=True)]
+    aligned = _curve(*_judged(hits, scores, crowded), n_truth)
     rotated_ap = aligned.AP
     if rotated_detections is not None and rotated_truth is not None:
         if not (len(rotated_detections) == len(rotated_truth) == len(scores)):
             raise ValueError("rotated detections and truth need one entry per image")
         hits = [match_by_iou(rotated_iou_matrix(d, t), s, iou_threshold) for d, s, t in zip(rotated_detections, scores, rotated_truth, strict=True)]
-        rotated_ap = _curve(hits, scores, n_truth).AP
+        rotated_ap = _curve(*_judged(hits, scores, crowded), n_truth).AP
     n_det = int(sum(np.asarray(s).size for s in scores))
     return DetectorScores(AP50=aligned.AP, AP50_rotated=rotated_ap, precision=aligned.precision, recall=aligned.recall,
                           F1=aligned.F1, threshold=aligned.threshold, images=len(truth), annotations=n_truth, detections=n_det)  # fmt: skip
+
+
+def _judged(hits: list[NDArray[np.bool_]], scores: Sequence[FloatArray],
+            crowded: list[NDArray[np.bool_]]) -> tuple[list[NDArray[np.bool_]], list[FloatArray]]:  # fmt: skip
+    """Each image's hits and scores less the detections that matched nobody inside a crowd region."""
+    kept = [h | ~c for h, c in zip(hits, crowded, strict=True)]
+    return [h[k] for h, k in zip(hits, kept, strict=True)], [np.asarray(s).reshape(-1)[k] for s, k in zip(scores, kept, strict=True)]
 
 
 class ImageDetector(Protocol):
@@ -250,6 +281,11 @@ class FrameResult:
         return self.entry.rotated if self.entry.oriented else _upright(self.entry.xyxy)
 
     @property
+    def crowd_xyxy(self) -> FloatArray:
+        """The frame's crowd regions (``iscrowd``) as upright boxes."""
+        return self.entry.crowd_xyxy
+
+    @property
     def detections_rotated(self) -> FloatArray:
         """As the detector turned them, unless the truth is upright boxes (then compared as the
         detections' enclosing boxes)."""
@@ -327,7 +363,7 @@ def read_image(path: Path) -> NDArray[np.uint8]:
 def score_frames(results: Sequence[FrameResult], ms_per_frame: float | None = None) -> DetectorScores:
     scores = score_boxes([r.xyxy for r in results], [r.confidence for r in results], [r.truth_xyxy for r in results],
                          rotated_detections=[r.detections_rotated for r in results],
-                         rotated_truth=[r.truth_rotated for r in results])  # fmt: skip
+                         rotated_truth=[r.truth_rotated for r in results], crowd=[r.crowd_xyxy for r in results])  # fmt: skip
     return replace(scores, ms_per_frame=ms_per_frame)
 
 

@@ -2,8 +2,9 @@
 
 Each frame is written with the truth in green, the detections kept at the scoring's best-F1
 threshold in yellow where they match a person (rotated IoU ≥ 0.5, as ``AP50_rotated`` counts) and
-red where they match nobody, each with its score; a cross marks the image circle's centre that
-radial angles were taken about. On a frame nobody annotated there is nothing to judge by: its
+red where they match nobody, each with its score; a crowd region (``iscrowd``) and the detections
+it makes count for nothing are grey; a cross marks the image circle's centre that radial angles
+were taken about. On a frame nobody annotated there is nothing to judge by: its
 detections are drawn in blue.
 
 Each drawing is named after its image's path below the images' common folder, so frames of one
@@ -23,12 +24,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bevflow.detect.rotated import rotated_corners, rotated_iou_matrix
-from bevflow.evaluation.detector import FrameResult, match_by_iou, read_image
+from bevflow.evaluation.detector import FrameResult, in_crowd, match_by_iou, read_image
 
 TRUTH = (80, 220, 80)
 HIT = (0, 220, 255)
 MISS = (40, 40, 255)
 UNJUDGED = (255, 160, 40)
+IGNORED = (160, 160, 160)
 
 
 def draw_frame(image: NDArray[np.uint8], result: FrameResult, threshold: float) -> NDArray[np.uint8]:
@@ -38,9 +40,11 @@ def draw_frame(image: NDArray[np.uint8], result: FrameResult, threshold: float) 
     keep = result.confidence >= threshold
     dets, conf = result.detections_rotated[keep], result.confidence[keep]
     hits = match_by_iou(rotated_iou_matrix(dets, result.truth_rotated), conf)
+    crowded = in_crowd(result.xyxy[keep], result.crowd_xyxy)
     _polygons(out, result.truth_rotated, TRUTH, line)
-    for box, score, hit in zip(dets, conf, hits, strict=True):
-        colour = (HIT if hit else MISS) if result.entry.annotated else UNJUDGED
+    _polygons(out, result.entry.crowd, IGNORED, line)
+    for box, score, hit, ignored in zip(dets, conf, hits, crowded, strict=True):
+        colour = (HIT if hit else IGNORED if ignored else MISS) if result.entry.annotated else UNJUDGED
         _polygons(out, box[None], colour, line)
         corner = rotated_corners(box[None])[0].min(axis=0)
         cv2.putText(out, f"{score:.2f}", (int(corner[0]), int(corner[1]) - 2), cv2.FONT_HERSHEY_SIMPLEX, 0.35 * line, colour, line)

@@ -28,19 +28,24 @@ from bevflow.evaluation.spread import Spread
 
 def turned(entry: CocoImage, image: NDArray[np.uint8], centre: tuple[float, float], degrees: float) -> tuple[CocoImage, NDArray[np.uint8]]:
     """``entry`` and ``image`` turned by ``degrees`` counter-clockwise on screen about ``centre``
-    (frame pixels). What leaves the frame is black; people whose box centre leaves it are dropped.
-    Needs rotated truth (``entry.oriented``): an axis-aligned box turned is no longer the box a
-    person would have had."""
+    (frame pixels). What leaves the frame is black; people (and crowd regions) whose box centre
+    leaves it are dropped. Needs rotated truth (``entry.oriented``): an axis-aligned box turned is
+    no longer the box a person would have had."""
     if not entry.oriented:
         raise ValueError(f"{entry.path.name}: turning a frame needs rotated truth boxes ([cx, cy, w, h, degrees])")
     h, w = image.shape[:2]
     m = cv2.getRotationMatrix2D(centre, degrees, 1.0)
     out = np.asarray(cv2.warpAffine(image, m, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT), dtype=np.uint8)
-    boxes = entry.rotated.copy()
-    boxes[:, :2] = boxes[:, :2] @ m[:, :2].T + m[:, 2]
-    boxes[:, 4] -= degrees  # box angles turn clockwise on screen (bevflow.detect.rotated)
-    inside = (boxes[:, 0] >= 0) & (boxes[:, 0] < w) & (boxes[:, 1] >= 0) & (boxes[:, 1] < h)
-    return replace(entry, rotated=boxes[inside]), out
+
+    def turn(rotated: NDArray[np.float64]) -> NDArray[np.float64]:
+        boxes = rotated.copy()
+        boxes[:, :2] = boxes[:, :2] @ m[:, :2].T + m[:, 2]
+        boxes[:, 4] -= degrees  # box angles turn clockwise on screen (bevflow.detect.rotated)
+        inside = (boxes[:, 0] >= 0) & (boxes[:, 0] < w) & (boxes[:, 1] >= 0) & (boxes[:, 1] < h)
+        kept: NDArray[np.float64] = boxes[inside]
+        return kept
+
+    return replace(entry, rotated=turn(entry.rotated), crowd=turn(entry.crowd)), out
 
 
 TURN_SCORED = ("AP50", "AP50_rotated", "precision", "recall", "F1")

@@ -44,6 +44,21 @@ def test_reads_axis_aligned_and_rotated_person_boxes(tmp_path: Path) -> None:
     assert len(images[1].rotated) == 0 and images[1].camera_height_m is None
 
 
+def test_crowd_regions_are_read_apart_from_people(tmp_path: Path) -> None:
+    doc = {
+        "images": [{"id": 7, "file_name": "a.jpg"}, {"id": 8, "file_name": "b.jpg"}],
+        "annotations": [
+            {"id": 1, "image_id": 7, "bbox": [10, 20, 4, 8], "iscrowd": 0},
+            {"id": 2, "image_id": 7, "bbox": [30, 30, 40, 20], "iscrowd": 1},
+            {"id": 3, "image_id": 8, "bbox": [5, 5, 10, 10, 90], "iscrowd": True},
+        ],
+    }
+    a, b = read_coco(_write(tmp_path, doc))
+    np.testing.assert_allclose(a.xyxy, [[10, 20, 14, 28]])
+    np.testing.assert_allclose(a.crowd_xyxy, [[30, 30, 70, 50]])
+    assert len(b.rotated) == 0 and b.crowd.tolist() == [[5, 5, 10, 10, 90]]
+
+
 def test_write_then_read_round_trip(tmp_path: Path) -> None:
     boxes = [np.array([[1.0, 2.0, 11.0, 22.0]]), np.zeros((0, 4))]
     write_coco(tmp_path / "c.json", [{"file_name": "x.png", "width": 5, "height": 5}, {"file_name": "y.png"}], boxes)
@@ -76,6 +91,8 @@ def test_write_then_read_round_trip(tmp_path: Path) -> None:
          r"images\[0\]\.camera_height_m: Input should be a valid number"),
         ({"images": [{"id": 1, "file_name": "a", "focal_px": -3}], "annotations": []}, r"images\[0\]\.focal_px: Input should be greater than 0"),
         ({"images": [{"id": 1}, {"id": 2}], "annotations": []}, r"images\[0\]\.file_name: Field required \(and 1 more\)"),
+        ({"images": [{"id": 1, "file_name": "a"}], "annotations": [{"id": 1, "image_id": 1, "bbox": [1, 2, 3, 4], "iscrowd": 2}]},
+         r"annotations\[0\]\.iscrowd: Input should be less than or equal to 1"),
     ],
 )
 def test_bad_files_say_why(tmp_path: Path, doc, message: str) -> None:  # noqa: ANN001

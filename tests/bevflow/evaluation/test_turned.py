@@ -51,6 +51,15 @@ def test_people_turned_out_of_the_frame_are_dropped() -> None:
     np.testing.assert_allclose(moved.rotated, [[160.0, 49.0, 10, 20, -90]])  # the other went above the frame
 
 
+def test_crowd_regions_turn_with_the_people() -> None:
+    person, crowd = [99.5, 159.5, 20, 50, 0], [[139.5, 99.5, 40, 30, 0], [99.5, 5.0, 40, 8, 0]]
+    entry = CocoImage(Path("a.jpg"), np.array([person]), oriented=True, crowd=np.array(crowd))
+    moved, _ = turned(entry, np.zeros((200, 200, 3), np.uint8), CENTRE, 90)
+    np.testing.assert_allclose(moved.rotated, [[159.5, 99.5, 20, 50, -90]], atol=1e-6)
+    # right of the centre → above it; at the top → at the left
+    np.testing.assert_allclose(moved.crowd, [[99.5, 59.5, 40, 30, -90], [5.0, 99.5, 40, 8, -90]], atol=1e-6)
+
+
 def test_axis_aligned_truth_is_refused() -> None:
     entry, image = _frame([[99.5, 159.5, 20, 50, 0]])
     with pytest.raises(ValueError, match="a.jpg: turning a frame needs rotated truth boxes"):
