@@ -238,7 +238,7 @@ def _hidden_behind(
         along = (fused.xy[behind] - centres[k, :2]) @ sight
         offset = fused.xy[behind] - fused.xy[s]
         covariance = covariance_of[behind] + covariance_of[s] + along_m**2 * np.outer(sight, sight)
-        d2 = np.einsum("ni,nij,nj->n", offset, matrix2.inverse(covariance), offset)
+        d2 = matrix2.mahalanobis2(offset, covariance)
         hides = (along > 0) & (along < run[k]) & (d2 < gate_chi2)
         if hides.any():
             into[s] = behind[hides][np.argmin(d2[hides])]
@@ -406,7 +406,7 @@ def _group(
     depth = (gap / distance_m) ** 2  # how deep inside its gate a pair lies: < 1 is inside
     if covariance is not None:
         with np.errstate(invalid="ignore"):
-            d2 = np.einsum("ni,nij,nj->n", diff, matrix2.inverse(covariance[a] + covariance[b]), diff)
+            d2 = matrix2.mahalanobis2(diff, covariance[a] + covariance[b])
         d2 = np.where(np.isfinite(d2) & (gap < max_gate_m), d2, np.inf)
         depth = np.minimum(depth, d2 / gate_chi2)
     usable = (camera[a] != camera[b]) & (depth < 1.0)
@@ -484,7 +484,7 @@ def _views_on_priors(
         return prior_of
     prior_covariance = priors.covariance if priors.covariance is not None else np.zeros((len(priors), 2, 2))
     offset = rows.xy[view] - priors.xy[prior]
-    d2 = np.einsum("ni,nij,nj->n", offset, matrix2.inverse(covariance[view] + prior_covariance[prior]), offset)
+    d2 = matrix2.mahalanobis2(offset, covariance[view] + prior_covariance[prior])
     within = d2 < gate_chi2
     view, prior, d2 = view[within], prior[within], d2[within]
     # One solve for all cameras: a (camera, prior) pair per column keeps each camera's choice its own.

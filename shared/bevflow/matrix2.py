@@ -3,8 +3,8 @@
 people, for matrices this small.
 
 >>> m = np.array([[[4.0, 1.0], [1.0, 2.0]]])
->>> determinant(m).tolist(), (inverse(m) @ m).round(12).tolist()
-([7.0], [[[1.0, 0.0], [0.0, 1.0]]])
+>>> determinant(m).tolist(), (inverse(m) @ m).round(12).tolist(), mahalanobis2(np.array([[2.0, 0.0]]), m).round(12).tolist()
+([7.0], [[[1.0, 0.0], [0.0, 1.0]]], [1.142857142857])
 """
 
 from __future__ import annotations
@@ -30,3 +30,10 @@ def inverse(m: FloatArray, det: FloatArray | None = None) -> FloatArray:
         inv = np.empty_like(m)
         inv[..., 0, 0], inv[..., 0, 1], inv[..., 1, 0], inv[..., 1, 1] = d / det, -b / det, -c / det, a / det
     return inv
+
+
+def mahalanobis2(offset: FloatArray, m: FloatArray, det: FloatArray | None = None) -> FloatArray:
+    """Squared Mahalanobis lengths of (..., 2) offsets under (..., 2, 2) covariances: offsetᵀ m⁻¹
+    offset. ``det`` as for ``inverse``."""
+    d2: FloatArray = np.einsum("...i,...ij,...j->...", offset, inverse(m, det), offset)
+    return d2

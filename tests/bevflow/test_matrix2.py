@@ -1,11 +1,11 @@
-"""2 × 2 inverses and determinants by hand, against numpy's, for any batch shape."""
+"""2 × 2 inverses, determinants and Mahalanobis lengths by hand, against numpy's, for any batch shape."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from bevflow.matrix2 import determinant, inverse
+from bevflow.matrix2 import determinant, inverse, mahalanobis2
 
 RNG = np.random.default_rng(0)
 
@@ -17,6 +17,11 @@ def test_inverse_and_determinant_match_numpy(shape: tuple[int, ...]) -> None:
     assert determinant(m).shape == shape and inverse(m).shape == m.shape
     np.testing.assert_allclose(determinant(m), np.linalg.det(m), rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(inverse(m), np.linalg.inv(m) if m.size else m, rtol=1e-9, atol=1e-12)
+    v = RNG.normal(size=(*shape, 2))
+    expected = np.einsum("...i,...i->...", v, np.linalg.solve(m, v[..., None])[..., 0]) if m.size else np.zeros(shape)
+    assert mahalanobis2(v, m).shape == shape
+    np.testing.assert_allclose(mahalanobis2(v, m), expected, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(mahalanobis2(v, m, determinant(m)), expected, rtol=1e-9, atol=1e-12)
 
 
 @pytest.mark.parametrize(

@@ -65,7 +65,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bevflow.detections import Cylinders
-from bevflow.matrix2 import determinant, inverse
+from bevflow.matrix2 import determinant, mahalanobis2
 from bevflow.metrics.matching import assign_edges, gated_pairs
 from bevflow.tracking.kalman import ConstantVelocityKalman, smooth
 
@@ -364,8 +364,8 @@ class Tracker:
         tracks = self._tracks
         offset = sightings.xy[None, :, :] - tracks.state[rows, None, :2]  # (tracks, sightings, 2)
         joint = tracks.covariance[rows, None, :2, :2] + sightings.covariance[None]
-        d2 = np.einsum("tsi,tsij,tsj->ts", offset, inverse(joint), offset)
-        sighted: BoolArray = (d2 < self.config.sighting_gate_chi2).any(axis=1)
+        d2 = mahalanobis2(offset, joint)
+        sighted: BoolArray = np.asarray((d2 < self.config.sighting_gate_chi2).any(axis=1))
         return sighted
 
     def _advance_clock(self, time_s: float) -> float:
@@ -393,7 +393,7 @@ class Tracker:
         joint = tracks.covariance[track, :2, :2] + measurement
         offset = cylinders.xy[det] - tracks.state[track, :2]
         size = determinant(joint)
-        d2 = np.einsum("ni,nij,nj->n", offset, inverse(joint, size), offset)
+        d2 = mahalanobis2(offset, joint, size)
         log_det = np.log(size)
         keep = d2 < chi2
         return _Candidates(track[keep], det[keep], pairs.dist[keep], d2[keep], log_det[keep], chi2)
