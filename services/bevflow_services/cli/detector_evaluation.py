@@ -20,7 +20,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from bevflow.detect.tiles import RIM_TILES, RimTileDetector, is_rim_tiles, load_rim_tiles, rim_tiles_model
+from bevflow.detect.tiles import RIM_TILES, RimTileDetector, is_rim_tiles, load_rim_tiles
 
 from bevflow_services.runtime import UserError
 
@@ -84,14 +84,10 @@ def _detector(args: argparse.Namespace, score_threshold: float | None) -> Detect
     (None: each model's own, as live)."""
     from bevflow.detect.runtime import DEFAULT_RANGES, Detector, DetectorBank
 
-    from bevflow_services.detector.models import resolve_model
+    from bevflow_services.detector.models import resolve_model, tile_model_file
 
     if is_rim_tiles(args.model):
-        try:
-            named = args.tile_model or rim_tiles_model(str(args.model))
-        except ValueError as e:
-            raise UserError(str(e)) from None
-        tiles = resolve_model(named) if named is not None else None
+        tiles = resolve_model(args.tile_model) if args.tile_model is not None else tile_model_file(str(args.model))
         return load_rim_tiles(threads=args.threads, tile_model=tiles, score_threshold=score_threshold)
     if args.model is None and args.scale is None:  # each frame gets the model of its (assumed) height
         return DetectorBank(DEFAULT_RANGES, threads=args.threads, score_threshold=score_threshold)

@@ -240,4 +240,3 @@ def _set_threshold(args: argparse.Namespace) -> int:
 from bevflow_services.cli.detector_evaluation import add_detector_arguments, run_detector_evaluation  # noqa: E402
 
 __all__ = ["add_detector_arguments", "register", "run_detector_evaluation"]
-

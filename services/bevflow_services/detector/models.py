@@ -95,7 +95,7 @@ class CameraModels:
 
         def named(name: str | Path) -> Detector | RimTileDetector:
             if is_rim_tiles(name):
-                tile_model = _tile_model(str(name), site_dir)
+                tile_model = tile_model_file(str(name), site_dir)
                 if tile_model not in tiles:
                     tiles[tile_model] = rim_tiles(model, threads, tile_model)
                 return tiles[tile_model]
@@ -137,9 +137,9 @@ class CameraModels:
         return {c: d.name if isinstance(d, RimTileDetector) else d.model_path.name for c, d in self.detectors.items()}
 
 
-def _tile_model(name: str, site_dir: Path | None) -> Path:
-    """The ONNX file a ``rim-tiles`` or ``rim-tiles:MODEL`` name runs on its tiles;
-    ``DetectorError`` where MODEL is missing or names no model."""
+def tile_model_file(name: str, site_dir: Path | None = None) -> Path:
+    """The ONNX file a ``rim-tiles`` or ``rim-tiles:MODEL`` name runs on its tiles (MODEL found
+    as ``resolve_model`` finds any); ``DetectorError`` where MODEL is missing or names no model."""
     try:
         tile_model = rim_tiles_model(name)
     except ValueError as e:

@@ -31,7 +31,7 @@ def load_recording(args: argparse.Namespace, site: Site, cameras: list[str]) -> 
     sizes = {c.id: c.image_size for c in site.cameras if c.id in cameras}
     try:
         recording = read_detections(args.detections, sizes)
-        check_no_long_gap({f"{c.camera_id}.txt": c.by_frame.keys() for c in recording.cameras}, args.fps)
+        check_no_long_gap(recording.frames_by_file(), args.fps)
     except RecordingError as exc:
         raise UserError(str(exc)) from None
     if not recording.frame_numbers:

@@ -79,6 +79,11 @@ class DetectionRecording:
         """Every frame number that has a box in some camera, sorted."""
         return tuple(sorted({f for c in self.cameras for f in c.by_frame}))
 
+    def frames_by_file(self, last: int | None = None) -> dict[str, set[int]]:
+        """Each camera's file name (``<camera id>.txt``) and the frame numbers it has boxes in (up
+        to ``last``), as ``check_no_long_gap`` takes them."""
+        return {file_name(c.camera_id): {f for f in c.by_frame if last is None or f <= last} for c in self.cameras}
+
 
 @dataclass(frozen=True)
 class WorldTruth:
@@ -95,6 +100,11 @@ class WorldTruth:
         return self.by_frame.get(frame) or (np.zeros(0, np.int64), np.zeros((0, 2)))
 
 
+def file_name(camera_id: str) -> str:
+    """The file of a camera's boxes in a detections folder."""
+    return f"{camera_id}.txt"
+
+
 def read_detections(folder: Path | str, cameras: dict[str, tuple[int, int]]) -> DetectionRecording:
     """``folder/<camera id>.txt`` for every camera of ``cameras`` (id -> image size (w, h), in the
     site's order)."""
@@ -103,7 +113,7 @@ def read_detections(folder: Path | str, cameras: dict[str, tuple[int, int]]) -> 
         raise RecordingError(f"{folder}: no such folder (expected one <camera id>.txt per camera)")
     out = []
     for camera_id, image_size in cameras.items():
-        path = folder / f"{camera_id}.txt"
+        path = folder / file_name(camera_id)
         if not path.is_file():
             raise RecordingError(f"{path}: no detections file for camera {camera_id!r} "
                                  f"(expected one <camera id>.txt per camera: {', '.join(cameras)})")

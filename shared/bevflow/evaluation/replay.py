@@ -126,8 +126,7 @@ def replay_tracking(
         raise ValueError("the truth has no rows: nothing to score")
     config = tracker or TrackerConfig.from_thresholds(site.thresholds)
     first_scored, last = truth.frame_numbers[0], truth.frame_numbers[-1]
-    stepped = {f"{c.camera_id}.txt": {f for f in c.by_frame if f <= last} for c in recording.cameras}
-    check_no_long_gap({**stepped, "the truth": truth.by_frame.keys()}, fps)
+    check_no_long_gap({**recording.frames_by_file(last), "the truth": truth.by_frame.keys()}, fps)
     first = min([first_scored, *recording.frame_numbers[:1]])
     run = _Run(site, config, area, threshold_m)
     projection = CameraProjection(site)
