@@ -221,6 +221,10 @@ class Thresholds(_Strict):
     track_activate_hits: Annotated[int, Field(ge=1)] = 3
     track_max_misses: Annotated[int, Field(ge=1)] = 5
     track_gate_m: PositiveFloat = 1.5
+    track_hypotheses: Annotated[int, Field(ge=1, le=100)] = Field(
+        default=1, description="ways of matching tracks to people held open for two seconds before deciding "
+        "(bevflow.tracking.hypotheses); 1 decides at every update. 20 holds identities better in a dense room "
+        "(docs/RESULTS.md, CMC2), at up to 30 times the tracker's work per update: for rooms of tens of people")
 
 
 class BusTls(_Strict):

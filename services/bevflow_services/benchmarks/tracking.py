@@ -45,9 +45,9 @@ STAGES = ("fusion", "tracker", "analytics")
 COVARIANCE_SOURCES = ("projector", "fusion")
 
 
-def grid_site(cameras: int, people: int) -> Site:
+def grid_site(cameras: int, people: int, hypotheses: int = 1) -> Site:
     """A site of ``cameras`` fisheyes in a near-square grid, four zones (the floor's quarters)
-    and a capacity of ``people``."""
+    and a capacity of ``people``; its tracker holds ``hypotheses`` ways of matching open."""
     cols = math.ceil(math.sqrt(cameras))
     rows = math.ceil(cameras / cols)
     width, depth = cols * CAMERA_SPACING_M, rows * CAMERA_SPACING_M
@@ -67,7 +67,7 @@ def grid_site(cameras: int, people: int) -> Site:
         for i, (x, y) in enumerate([(0, 0), (w, 0), (0, d), (w, d)])
     ]
     return Site(site="bench", cameras=configs, zones=zones, floor=(0.0, 0.0, width, depth),
-                thresholds=Thresholds(site_capacity=max(1, people)))
+                thresholds=Thresholds(site_capacity=max(1, people), track_hypotheses=hypotheses))
 
 
 def walk(people: int, ticks: int, floor: tuple[float, float, float, float], rng: np.random.Generator) -> np.ndarray:
@@ -147,14 +147,14 @@ def with_projector_covariance(site: Site, per_camera: dict[str, Cylinders]) -> d
 
 
 def bench_tick(people: int, cameras: int, ticks: int = 100, warmup: int = 20, seed: int = 0,
-               profiler: cProfile.Profile | None = None, covariance: str = "projector") -> dict:
+               profiler: cProfile.Profile | None = None, covariance: str = "projector", hypotheses: int = 1) -> dict:
     """Time ``ticks`` steps after ``warmup`` untimed ones (tracks need a few hits to confirm);
     ``profiler`` (optional) is enabled around the timed steps only. ``covariance`` says where the
     position covariances come from: "projector" (with the cylinders) or "fusion" (in the tick)."""
     if covariance not in COVARIANCE_SOURCES:
         raise ValueError(f"covariance must be one of {COVARIANCE_SOURCES}, got {covariance!r}")
     rng = np.random.default_rng(seed)
-    site = grid_site(cameras, people)
+    site = grid_site(cameras, people, hypotheses)
     truth = walk(people, warmup + ticks, site.floor, rng)  # type: ignore[arg-type]
     observations = [observe(site, xy, rng) for xy in truth]
     if covariance == "projector":
@@ -203,9 +203,10 @@ def bench_tick(people: int, cameras: int, ticks: int = 100, warmup: int = 20, se
 
 
 def bench_grid(people: list[int], cameras: list[int], ticks: int, warmup: int, seed: int = 0,
-               covariance: str = "projector") -> list[dict]:
+               covariance: str = "projector", hypotheses: int = 1) -> list[dict]:
     """``bench_tick`` for every (people, cameras) pair."""
-    return [bench_tick(p, c, ticks, warmup, seed, covariance=covariance) for c in cameras for p in people]
+    return [bench_tick(p, c, ticks, warmup, seed, covariance=covariance, hypotheses=hypotheses)
+            for c in cameras for p in people]
 
 
 def format_rows(rows: list[dict]) -> list[str]:
@@ -232,6 +233,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--covariance", choices=COVARIANCE_SOURCES, default="projector",
                         help="where position covariances come from: with the cylinders, as the projector sends "
                         "them (default), or computed by fusion in the tick")
+    parser.add_argument("--hypotheses", type=int, default=1,
+                        help="the site's track_hypotheses: ways of matching held open (default 1)")
     parser.add_argument("--profile", action="store_true",
                         help="profile the timed steps of the first case (cProfile, thread CPU time) instead of timing")
     args = parser.parse_args(argv)
@@ -240,10 +243,12 @@ def main(argv: list[str] | None = None) -> None:
 
         profiler = cProfile.Profile(time.thread_time)
         bench_tick(args.people[0], args.cameras[0], args.ticks, args.warmup, profiler=profiler,
-                   covariance=args.covariance)
+                   covariance=args.covariance, hypotheses=args.hypotheses)
         pstats.Stats(profiler).sort_stats("tottime").print_stats(30)
         return
-    for line in format_rows(bench_grid(args.people, args.cameras, args.ticks, args.warmup, covariance=args.covariance)):
+    rows = bench_grid(args.people, args.cameras, args.ticks, args.warmup, covariance=args.covariance,
+                      hypotheses=args.hypotheses)
+    for line in format_rows(rows):
         print(line, flush=True)
 
 

@@ -17,13 +17,15 @@ import math
 from pathlib import Path
 from typing import Any
 
+from pydantic import ValidationError
+
 from bevflow.datasets.mot import MIN_CONFIDENCE, RecordingError, read_detections, read_truth
 from bevflow.datasets.wildtrack import FloorArea
 from bevflow.evaluation.ideal import ideal_tracking
 from bevflow.evaluation.perturbed import BoxPerturbation, PerturbedReplays, perturbed_replays
 from bevflow.evaluation.replay import SCORED, Everywhere, ReplayEvaluation, replay_tracking
 from bevflow.evaluation.spread import Spread
-from bevflow.site import Site, SiteError, load_site_or_builtin
+from bevflow.site import Site, SiteError, Thresholds, load_site_or_builtin
 from bevflow.tracking.tracker import TrackTable
 
 from bevflow_services.runtime import UserError
@@ -46,6 +48,9 @@ def add_replay_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--min-confidence", type=float, default=MIN_CONFIDENCE, metavar="C",
                        help=f"use boxes of confidence C or more (default {MIN_CONFIDENCE:g}, the usual operating point of "
                        "a COCO person detector such as Faster R-CNN)")
+    group.add_argument("--hypotheses", type=int, metavar="N",
+                       help="hold N ways of matching tracks to people open for two seconds before deciding, instead of "
+                       "the site's track_hypotheses (1: decide at every update)")
     group.add_argument("--tracks-out", type=Path, metavar="FILE", help="write the online tracks as frame,id,x,y lines")
     perturbation = BoxPerturbation()
     group.add_argument("--perturb", type=int, default=0, metavar="N",
@@ -78,6 +83,8 @@ def run_replay(args: argparse.Namespace) -> tuple[ReplayEvaluation, dict[str, An
         site = load_site_or_builtin(args.site)
     except SiteError as exc:
         raise UserError(str(exc)) from None
+    if args.hypotheses is not None:
+        site = with_hypotheses(site, args.hypotheses)
     area = parse_area(args.area, site)
     try:
         recording = read_detections(args.detections, {c.id: c.image_size for c in site.cameras})
@@ -104,6 +111,15 @@ def run_replay(args: argparse.Namespace) -> tuple[ReplayEvaluation, dict[str, An
         print(format_spread_rows(f"the truth moved by {args.ideal_noise:g} m (σ), tracked alone, {runs} seed(s):", ideal))
         extra["ideal"] = {"noise_m": args.ideal_noise, "runs": runs, **{k: s.as_dict() for k, s in ideal.items()}}
     return result, extra
+
+
+def with_hypotheses(site: Site, hypotheses: int) -> Site:
+    """``site`` with its tracker holding ``hypotheses`` ways of matching open (``--hypotheses``)."""
+    try:
+        thresholds = Thresholds.model_validate({**site.thresholds.model_dump(), "track_hypotheses": hypotheses})
+    except ValidationError as exc:
+        raise UserError(f"--hypotheses must be a whole number from 1 to 100, got {hypotheses}") from exc
+    return site.model_copy(update={"thresholds": thresholds})
 
 
 def _perturbation(args: argparse.Namespace) -> BoxPerturbation:
@@ -144,7 +160,8 @@ def format_replay(r: ReplayEvaluation, site: Site) -> str:
     head = (f"{site.site}: {len(site.cameras)} cameras, frames {r.frame_numbers[0]}..{r.frame_numbers[-1]} at {r.fps:g} fps, "
             f"boxes of confidence >= {r.min_confidence:g}, matched within {r.threshold_m:g} m; tracker: "
             f"{c.activate_hits} hits to confirm, {c.max_misses} misses to drop, gate {c.gate_m:g} m"
-            + ("" if c.gate_chi2 is None else f" and chi2 {c.gate_chi2:g} of the prediction"))
+            + ("" if c.gate_chi2 is None else f" and chi2 {c.gate_chi2:g} of the prediction")
+            + ("" if c.hypotheses == 1 else f", {c.hypotheses} hypotheses over {c.hypothesis_window_s:g} s"))
     columns = f"{'':<9} {'MODA':>6} {'MOTA':>6} {'IDF1':>6} {'HOTA':>6} {'DetA':>6} {'AssA':>6} {'IDSW':>5} {'prec':>6} {'recall':>6} {'APE m':>6} {'frames':>6}"
     rows = [head, columns]
     for name, s, h in (("online", r.scores, r.hota), ("settled", r.settled, r.settled_hota)):
@@ -152,7 +169,8 @@ def format_replay(r: ReplayEvaluation, site: Site) -> str:
                     f"{s.IDSW:>5} {_num(s.precision)} {_num(s.recall)} {_num(s.APE)} {s.frames:>6}")
     d = r.detection
     rows.append(f"{'fused':<9} {_num(d.MODA)} {'':>41} {_num(d.precision)} {_num(d.recall)} {_num(d.APE)} {d.frames:>6}")
-    rows.append("online: the tracks as the live tracker publishes them; settled: one update late; "
+    late = "one update late" if c.hypotheses == 1 else f"as decided {c.hypothesis_window_s:g} s later, then one update late"
+    rows.append(f"online: the tracks as the live tracker publishes them; settled: {late}; "
                 "fused: each frame's fused detections before tracking")
     return "\n".join(rows)
 

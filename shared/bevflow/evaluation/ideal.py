@@ -29,7 +29,8 @@ from bevflow.evaluation.replay import EVERYWHERE, SCORED, headline
 from bevflow.evaluation.spread import Spread
 from bevflow.metrics.hota import score_hota
 from bevflow.metrics.tracking import score_tracking
-from bevflow.tracking.tracker import Tracker, TrackerConfig
+from bevflow.tracking.hypotheses import online_tracker
+from bevflow.tracking.tracker import TrackerConfig
 
 # The least position error a point claims: no fused point claims less (fusion's floor_m, 0.1 m, over
 # four views), and a tighter claim shrinks the tracker's gate below a walker's turn.
@@ -63,7 +64,7 @@ def ideal_tracking(
 def _one_run(truth: WorldTruth, fps: float, noise_m: float, config: TrackerConfig, seed: int, area: Area,
              threshold_m: float) -> dict[str, float]:  # fmt: skip
     rng = np.random.default_rng(seed)
-    tracker = Tracker(config)
+    tracker = online_tracker(config)
     variance = max(noise_m, MIN_NOISE_M) ** 2
     gt, found = [], []
     first, last = truth.frame_numbers[0], truth.frame_numbers[-1]

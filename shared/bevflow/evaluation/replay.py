@@ -38,6 +38,7 @@ from bevflow.metrics.detection import DetectionScores, score_detections
 from bevflow.metrics.hota import HotaScores, score_hota
 from bevflow.metrics.tracking import TrackingScores, score_tracking
 from bevflow.site import Site
+from bevflow.tracking.hypotheses import final_updates, last_updates
 from bevflow.tracking.settled import SettledTracks
 from bevflow.tracking.tracker import TrackerConfig, TrackTable
 
@@ -153,9 +154,7 @@ class _Run:
     def step(self, frame: int, time_s: float, per_camera: dict[str, Cylinders], gt: Frame | None) -> None:
         result = self.site_tracker.step(round(time_s * 1e9), per_camera)
         self.tracks.append((frame, result.table))
-        tracker = self.site_tracker.tracker
-        if (settled := self.late.push(tracker.tracks(include_tentative=True), time_s)) is not None:
-            self.settled.append(settled.tracks)
+        self._settle(final_updates(self.site_tracker.tracker, time_s))
         if gt is None:
             return
         if self.scored_from is None:
@@ -164,7 +163,14 @@ class _Run:
         fused = result.fusion.fused.xy
         self.fused.append(fused[scored_estimates(self.area, gt[1], fused, self.threshold_m)])
 
+    def _settle(self, final: list[tuple[float, TrackTable]]) -> None:
+        """Pass the updates the tracker made final to the one-update-late output."""
+        for time_s, tracks in final:
+            if (settled := self.late.push(tracks, time_s)) is not None:
+                self.settled.append(settled.tracks)
+
     def finish(self, frame_numbers: tuple[int, ...], fps: float, min_confidence: float) -> ReplayEvaluation:
+        self._settle(last_updates(self.site_tracker.tracker))
         if (settled := self.late.flush()) is not None:
             self.settled.append(settled.tracks)
         start = self.scored_from or 0

@@ -69,7 +69,8 @@ from bevflow.evaluation.detection import (
 )
 from bevflow.metrics.tracking import TrackingScores, score_tracking
 from bevflow.tracking.settled import SettledTracks
-from bevflow.tracking.tracker import Tracker, TrackerConfig, TrackTable
+from bevflow.tracking.hypotheses import final_updates, last_updates, online_tracker
+from bevflow.tracking.tracker import TrackerConfig, TrackTable
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -190,13 +191,17 @@ def track_and_match_both(
         raise ValueError(
             f"gt, fused, times_s and sightings differ in length: {len(gt)}, {len(fused)}, {len(times_s)}, {len(sightings)}"
         )
-    tracker = Tracker(config)
+    tracker = online_tracker(config)
     online: list[TrackTable] = []
     settled: list[TrackTable] = []
     late = SettledTracks()
     for cylinders, seen, time_s in zip(fused, sightings, times_s, strict=True):
         online.append(tracker.update(cylinders, time_s, seen))
-        if (frame := late.push(tracker.tracks(include_tentative=True), time_s)) is not None:
+        for final_s, tracks in final_updates(tracker, time_s):
+            if (frame := late.push(tracks, final_s)) is not None:
+                settled.append(frame.tracks)
+    for final_s, tracks in last_updates(tracker):
+        if (frame := late.push(tracks, final_s)) is not None:
             settled.append(frame.tracks)
     if (frame := late.flush()) is not None:
         settled.append(frame.tracks)

@@ -20,7 +20,8 @@ from bevflow.fusion import Fusion
 from bevflow.fusion import fuse_cylinders as fuse_cylinders
 from bevflow.schemas import DistanceIncident, DistanceViolation, Occupancy, OverCapacity, Tracks
 from bevflow.site import Site
-from bevflow.tracking.tracker import Tracker, TrackerConfig, TrackTable
+from bevflow.tracking.hypotheses import online_tracker
+from bevflow.tracking.tracker import TrackerConfig, TrackTable
 
 
 @dataclass(frozen=True, eq=False)
@@ -50,7 +51,7 @@ class SiteTracker:
         self.site = site
         self.camera_ids = site.camera_ids
         self.cameras = [site.camera(c) for c in self.camera_ids]
-        self.tracker = Tracker(tracker_config or TrackerConfig.from_thresholds(site.thresholds), first_id=first_id)
+        self.tracker = online_tracker(tracker_config or TrackerConfig.from_thresholds(site.thresholds), first_id)
         self.analytics = SiteAnalytics(site)
         self._alone = [[c] for c in self.camera_ids]  # shared lists, read only: serialised as they are
 

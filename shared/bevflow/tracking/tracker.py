@@ -67,6 +67,7 @@ from numpy.typing import NDArray
 from bevflow.detections import Cylinders
 from bevflow.matrix2 import determinant, mahalanobis2
 from bevflow.metrics.matching import assign_edges, gated_pairs
+from bevflow.metrics.ranked_matching import ranked_matchings
 from bevflow.tracking.kalman import ConstantVelocityKalman, smooth
 
 if TYPE_CHECKING:  # the tracker reads a site's thresholds but needs no site to run
@@ -125,6 +126,9 @@ class TrackerConfig:
       0.02 m of noise: IDF1 0.45, 78 identity switches); what is left over after every track had
       its pick is no neighbour's detection. 2 m/s (0.5 m at 4 fps) brings that to 0.78–0.92 (2–11
       switches) and leaves the real CMC2 boxes as they were (``docs/RESULTS.md``). None: no such pass.
+    - ``hypotheses``: how many ways of matching are held open (``bevflow.tracking.hypotheses``;
+      1: each update decides at once, this class alone), for ``hypothesis_window_s`` seconds
+      before the likeliest one's decisions are final. More than 1 needs ``gate_chi2``.
     """
 
     gate_m: float = 1.5
@@ -145,14 +149,20 @@ class TrackerConfig:
     sighting_gate_chi2: float = 9.21
     gate_chi2: float | None = 9.21
     lost_speed_mps: float | None = 2.0
+    hypotheses: int = 1
+    hypothesis_window_s: float = 2.0
 
     def __post_init__(self) -> None:
+        if self.hypotheses > 1 and self.gate_chi2 is None:
+            raise ValueError("TrackerConfig.hypotheses > 1 needs the uncertainty gate (gate_chi2)")
         if self.lost_speed_mps is not None and not self.lost_speed_mps > 0:
             raise ValueError(f"TrackerConfig.lost_speed_mps must be > 0 or None, got {self.lost_speed_mps}")
-        for name in ("gate_m", "weak_gate_m", "measurement_std_m", "initial_speed_std_mps", "sighting_gate_chi2"):
+        names = ("gate_m", "weak_gate_m", "measurement_std_m", "initial_speed_std_mps", "sighting_gate_chi2",
+                 "hypothesis_window_s")
+        for name in names:
             if not getattr(self, name) > 0:
                 raise ValueError(f"TrackerConfig.{name} must be > 0, got {getattr(self, name)}")
-        for name in ("activate_hits", "max_misses", "tentative_max_misses"):
+        for name in ("activate_hits", "max_misses", "tentative_max_misses", "hypotheses"):
             if getattr(self, name) < 1:
                 raise ValueError(f"TrackerConfig.{name} must be >= 1, got {getattr(self, name)}")
         if self.process_noise < 0 or self.report_max_misses < 0:
@@ -163,11 +173,13 @@ class TrackerConfig:
     @classmethod
     def from_thresholds(cls, thresholds: Thresholds, **overrides: Any) -> TrackerConfig:
         """Settings from a site's ``Thresholds`` (track_gate_m, track_activate_hits,
-        track_max_misses); ``overrides`` set any other field (checked as the fields are)."""
+        track_max_misses, track_hypotheses); ``overrides`` set any other field (checked as the
+        fields are)."""
         site = cls(
             gate_m=thresholds.track_gate_m,
             activate_hits=thresholds.track_activate_hits,
             max_misses=thresholds.track_max_misses,
+            hypotheses=thresholds.track_hypotheses,
         )
         return replace(site, **overrides)
 
@@ -273,21 +285,60 @@ class _Candidates:
         return self.d2[allowed] + log_det, self.chi2 + float(log_det.max())
 
 
+@dataclass(frozen=True, eq=False)
+class Choice:
+    """One way to match the confirmed tracks to the strong detections of an update (its first
+    pass): rows of the tracker's tracks, ``track``, take detections ``detection``. ``cost``: the
+    negative log-likelihood of the whole pass (``Tracker.branch``)."""
+
+    track: IntArray
+    detection: IntArray
+    cost: float
+
+
+@dataclass(eq=False)
+class _Numbering:
+    """The next id and the next key, shared by a tracker and its copies (``Tracker.copy``), so
+    that no two tracks of any of them ever get the same one."""
+
+    next_id: int
+    next_key: int = 0
+
+
+@dataclass(frozen=True, eq=False)
+class _Passes:
+    """Which detections are strong and which weak, every (track, detection) pair within the
+    wider distance gate (``near``), and those of them within the uncertainty gate (``pairs``; the
+    same pairs where there is none)."""
+
+    strong: BoolArray
+    weak: BoolArray
+    near: _Candidates
+    pairs: _Candidates
+
+
 class Tracker:
     """One online tracker for a whole site; see the module docstring."""
 
     def __init__(self, config: TrackerConfig | None = None, first_id: int = 1) -> None:
         self.config = config or TrackerConfig()
         self._kalman = self.config.kalman()
-        self._next_id = int(first_id)
-        self._next_key = 0
+        self._numbering = _Numbering(int(first_id))
         self._tracks = _Tracks()
         self._time_s: float | None = None
+
+    def copy(self) -> Tracker:
+        """An independent tracker in the same state, numbering ids and keys from the same counter
+        as this one: whatever either confirms later gets an id the other never gives."""
+        twin = Tracker.__new__(Tracker)
+        twin.config, twin._kalman, twin._numbering, twin._time_s = self.config, self._kalman, self._numbering, self._time_s
+        twin._tracks = _Tracks(**{f.name: getattr(self._tracks, f.name).copy() for f in fields(self._tracks)})
+        return twin
 
     @property
     def next_id(self) -> int:
         """The id the next confirmed track will get (pass it as ``first_id`` on restart)."""
-        return self._next_id
+        return self._numbering.next_id
 
     @property
     def time_s(self) -> float | None:
@@ -319,21 +370,64 @@ class Tracker:
         and return the confirmed tracks to report (see ``TrackerConfig.report_max_misses``).
         ``sightings``: views that placed nobody (``Fusion.sightings``, with covariances), used
         only by ``coast_needs_sighting``."""
-        dt = self._advance_clock(time_s)
+        dt = self._predict(time_s)
+        return self._update(cylinders, time_s, sightings, dt, self._candidates(cylinders), None)
+
+    def branch(
+        self, cylinders: Cylinders, time_s: float, sightings: Cylinders | None, count: int, within: float
+    ) -> list[tuple[Choice, Tracker, TrackTable]]:
+        """``update`` made on copies of this tracker, one per way of matching the confirmed tracks
+        to the strong detections: the best and up to ``count`` − 1 runners-up costing at most
+        ``within`` more (``bevflow.metrics.ranked_matching``); this tracker is not moved.
+
+        Costed by negative log-likelihood (twice it, less constants): d² + ln |S| a pair (module
+        docstring), and (``gate_chi2`` + ln |S₀|) / 2 a track or detection left over, S₀ the
+        filter's own measurement covariance: a pair is worth making when it is likelier than one
+        at the gate's edge with the filter's nominal noise. ``update``'s own first pass prices a
+        leftover relative to the pairs at hand instead; these costs compare across trackers whose
+        tracks differ. Needs the uncertainty gate (``gate_chi2``)."""
+        chi2 = self.config.gate_chi2
+        if chi2 is None:
+            raise ValueError("Tracker.branch needs the uncertainty gate: TrackerConfig.gate_chi2 is None")
+        moved = self.copy()
+        dt = moved._predict(time_s)
+        candidates = moved._candidates(cylinders)
+        out = []
+        for choice in moved._choices(len(cylinders), candidates, chi2, count, within):
+            child = moved.copy()
+            out.append((choice, child, child._update(cylinders, time_s, sightings, dt, candidates, choice)))
+        return out
+
+    def _choices(self, n_detections: int, candidates: _Passes, chi2: float, count: int, within: float) -> list[Choice]:
+        """``branch``'s ranked matchings, for tracks already moved to the update's time."""
+        strong, pairs = candidates.strong, candidates.pairs
+        if pairs.d2 is None or pairs.log_det is None:
+            raise ValueError("ranked choices need the pairs' likelihoods (the uncertainty gate)")
+        confirmed = self._tracks.confirmed
+        leftover = 0.5 * (chi2 + 4.0 * math.log(self.config.measurement_std_m))
+        cost = pairs.d2 + pairs.log_det
+        allowed = confirmed[pairs.track] & strong[pairs.det] & (pairs.dist <= self.config.gate_m)
+        allowed &= cost < 2.0 * leftover
+        track, det, cost = pairs.track[allowed], pairs.det[allowed], cost[allowed]
+        ranked = ranked_matchings(track, det, cost, len(confirmed), n_detections, leftover, count, within)
+        best = ranked[0]
+        key = track * n_detections + det
+        order = np.argsort(key)
+        paid = cost[order[np.searchsorted(key, best.rows * n_detections + best.cols, sorter=order)]].sum()
+        left = int(confirmed.sum()) + int(strong.sum()) - 2 * len(best.rows)
+        base = float(paid) + leftover * left
+        return [Choice(m.rows, m.cols, base + m.extra) for m in ranked]
+
+    def _update(
+        self, cylinders: Cylinders, time_s: float, sightings: Cylinders | None, dt: float, candidates: _Passes,
+        choice: Choice | None,
+    ) -> TrackTable:  # fmt: skip
+        """``update`` after the prediction: the association passes (the first one as ``choice``
+        has it, where given), the filters' correction, confirmations, retirements and births."""
         cfg = self.config
         tracks = self._tracks
-        if len(tracks):
-            tracks.state, tracks.covariance = self._kalman.predict(tracks.state, tracks.covariance, dt)
-        tracks.detection = np.full(len(tracks), -1, dtype=np.int64)
-
-        usable = np.isfinite(cylinders.xy).all(axis=1) & (cylinders.score >= cfg.min_score)
-        strong = usable & (cylinders.score >= cfg.weak_score)
-        weak = usable & ~strong
+        strong, weak, near, pairs = candidates.strong, candidates.weak, candidates.near, candidates.pairs
         taken = np.zeros(len(cylinders), dtype=bool)
-        # Every (track, detection) pair within the wider gate, found once for every pass.
-        det_xy = np.where(usable[:, None], cylinders.xy, np.nan)
-        near = _Candidates(*gated_pairs(tracks.state[:, :2], det_xy, max(cfg.gate_m, cfg.weak_gate_m)))
-        pairs = near if cfg.gate_chi2 is None else self._within_innovation(near, cylinders, cfg.gate_chi2)
         passes = [
             (pairs, tracks.confirmed, strong, cfg.gate_m),
             (pairs, ~tracks.confirmed, strong, cfg.gate_m),
@@ -341,8 +435,11 @@ class Tracker:
         ]
         if cfg.gate_chi2 is not None and cfg.lost_speed_mps is not None:
             passes.append((near, tracks.confirmed, strong, min(cfg.gate_m, cfg.lost_speed_mps * dt)))
-        for candidates, track_ok, det_ok, gate in passes:
-            self._associate(candidates, track_ok & (tracks.detection < 0), det_ok & ~taken, gate)
+        for n, (pass_pairs, track_ok, det_ok, gate) in enumerate(passes):
+            if n == 0 and choice is not None:
+                tracks.detection[choice.track] = choice.detection
+            else:
+                self._associate(pass_pairs, track_ok & (tracks.detection < 0), det_ok & ~taken, gate)
             taken[tracks.detection[tracks.detection >= 0]] = True
 
         self._correct(cylinders)
@@ -354,6 +451,25 @@ class Tracker:
             coasting = np.flatnonzero(report & (self._tracks.misses > 0))
             report[coasting] = self._sighted(coasting, sightings)
         return self._tracks.select(report).table(time_s)
+
+    def _predict(self, time_s: float) -> float:
+        """Move the clock and every track to ``time_s``; the seconds since the last update."""
+        dt = self._advance_clock(time_s)
+        tracks = self._tracks
+        if len(tracks):
+            tracks.state, tracks.covariance = self._kalman.predict(tracks.state, tracks.covariance, dt)
+        tracks.detection = np.full(len(tracks), -1, dtype=np.int64)
+        return dt
+
+    def _candidates(self, cylinders: Cylinders) -> _Passes:
+        """What every association pass of an update chooses from, found once for all of them."""
+        cfg = self.config
+        usable = np.isfinite(cylinders.xy).all(axis=1) & (cylinders.score >= cfg.min_score)
+        strong = usable & (cylinders.score >= cfg.weak_score)
+        det_xy = np.where(usable[:, None], cylinders.xy, np.nan)
+        near = _Candidates(*gated_pairs(self._tracks.state[:, :2], det_xy, max(cfg.gate_m, cfg.weak_gate_m)))
+        pairs = near if cfg.gate_chi2 is None else self._within_innovation(near, cylinders, cfg.gate_chi2)
+        return _Passes(strong, usable & ~strong, near, pairs)
 
     def _sighted(self, rows: IntArray, sightings: Cylinders | None) -> BoolArray:
         """Which tracks ``rows`` have a sighting within the gate of their predicted feet."""
@@ -441,8 +557,8 @@ class Tracker:
         new = ~tracks.confirmed & (tracks.hits >= self.config.activate_hits)
         # Ids go in order of birth, so they are reproducible for a given input.
         order = np.flatnonzero(new)
-        tracks.id[order] = self._next_id + np.arange(len(order))
-        self._next_id += len(order)
+        tracks.id[order] = self._numbering.next_id + np.arange(len(order))
+        self._numbering.next_id += len(order)
         tracks.confirmed[new] = True
 
     def _retire(self) -> None:
@@ -463,8 +579,8 @@ class Tracker:
             id=np.full(n, -1, np.int64), state=state, covariance=covariance, height=cylinders.height[det].copy(),
             radius=cylinders.radius[det].copy(), hits=hits, misses=np.zeros(n, np.int64),
             born_s=np.full(n, time_s), detection=det.astype(np.int64), confirmed=np.zeros(n, bool),
-            key=self._next_key + np.arange(n, dtype=np.int64),
+            key=self._numbering.next_key + np.arange(n, dtype=np.int64),
         )  # fmt: skip
-        self._next_key += n
+        self._numbering.next_key += n
         self._tracks = self._tracks.append(born)
         self._confirm()

@@ -1,6 +1,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
@@ -88,3 +89,15 @@ def test_weak_boxes_are_left_out_and_frames_without_boxes_are_scored(tmp_path: P
     late = replay(tmp_path, tracker=WILDTRACK_TRACKER)
     assert late.frame_numbers == tuple(range(8)) and late.scores.frames == 8
     assert (late.detection.tp, late.detection.fn) == (3 * 6, 3 * 2) and late.scores.fn >= 3 * 2
+
+
+def test_hypotheses_are_scored_online_and_once_final(tmp_path: Path) -> None:
+    """With several hypotheses the settled output is built from the updates the tracker made
+    final (``HypothesisTracker.final``): every frame once. On clean boxes nothing is in doubt, so
+    both outputs score as the plain tracker's do."""
+    write_recording(walkers(0.7), tmp_path)
+    plain = replay(tmp_path, area=ANNOTATED_AREA)
+    held = replay(tmp_path, area=ANNOTATED_AREA, tracker=replace(plain.tracker, hypotheses=10))
+    assert held.tracker.hypotheses == 10 and held.settled.frames == held.scores.frames == 8
+    assert held.scores.as_dict() == pytest.approx(plain.scores.as_dict())
+    assert held.settled.as_dict() == pytest.approx(plain.settled.as_dict())

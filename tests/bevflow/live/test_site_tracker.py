@@ -6,7 +6,7 @@ import pytest
 from bevflow.detections import Cylinders
 from bevflow.fusion import with_position_covariance
 from bevflow.live.site_tracker import SiteTracker
-from bevflow.site import parse_site
+from bevflow.site import Site, parse_site
 
 SITE = """
 site: hall
@@ -26,12 +26,18 @@ def site():
     return parse_site(SITE)
 
 
+def holding(site: Site, hypotheses: int) -> Site:
+    """``site`` with its tracker holding ``hypotheses`` ways of matching open."""
+    return site.model_copy(update={"thresholds": site.thresholds.model_copy(update={"track_hypotheses": hypotheses})})
+
+
 def seen(*xy: tuple[float, float]) -> Cylinders:
     return Cylinders(xy=np.array(xy, dtype=np.float64).reshape(-1, 2))
 
 
-def test_a_person_seen_by_two_cameras_is_one_track_seen_by_both(site) -> None:
-    tracker = SiteTracker(site)
+@pytest.mark.parametrize("hypotheses", [1, 5])
+def test_a_person_seen_by_two_cameras_is_one_track_seen_by_both(site, hypotheses: int) -> None:
+    tracker = SiteTracker(holding(site, hypotheses))
     for k in range(4):
         step = tracker.step(T0 + k * S // 10, {"west": seen((3.0, 0.0)), "east": seen((3.1, 0.05))})
     assert [t.cameras for t in step.tracks.tracks] == [["west", "east"]]
@@ -54,11 +60,12 @@ def test_two_people_too_close_for_long_enough_raise_one_violation_and_over_capac
     assert step.tracks.violations == [tuple(sorted(violation.tracks))]
 
 
-def test_first_id_continues_a_previous_run(site) -> None:
-    tracker = SiteTracker(site, first_id=500)
+@pytest.mark.parametrize("hypotheses", [1, 5])
+def test_first_id_continues_a_previous_run(site, hypotheses: int) -> None:
+    tracker = SiteTracker(holding(site, hypotheses), first_id=500)
     for k in range(3):
         step = tracker.step(T0 + k * S // 10, {"east": seen((5.0, 1.0))})
-    assert [t.id for t in step.tracks.tracks] == [500]
+    assert [t.id for t in step.tracks.tracks] == [500] and tracker.tracker.next_id == 501
 
 
 def test_a_tick_without_cameras_is_valid(site) -> None:

@@ -68,8 +68,10 @@ def test_each_camera_reports_only_the_people_inside_its_circle() -> None:
             assert count <= 2  # only a false positive could land there
 
 
-def test_bench_tick_reports_finite_numbers_and_every_stage() -> None:
-    row = bench_tick(people=10, cameras=4, ticks=3, warmup=4)
+@pytest.mark.parametrize("hypotheses", [1, 5])
+def test_bench_tick_reports_finite_numbers_and_every_stage(hypotheses: int) -> None:
+    assert grid_site(4, people=10, hypotheses=hypotheses).thresholds.track_hypotheses == hypotheses
+    row = bench_tick(people=10, cameras=4, ticks=3, warmup=4, hypotheses=hypotheses)
     for key in ("ms_p50", "ms_p95", "cpu_ms_p50", "cylinders_per_tick", "MOTA", "IDF1"):
         assert math.isfinite(row[key]), key
     assert set(row["stage_cpu_ms_p50"]) == {"fusion", "tracker", "analytics", "rest"}

@@ -68,6 +68,16 @@ def test_ideal_runs_track_the_truth_alone_and_write_their_spread(recording: Path
     assert "ideal" not in json.loads(out.read_text()) and "tracked alone" not in capsys.readouterr().out
 
 
+def test_hypotheses_override_the_sites_and_are_named(recording: Path, capsys: pytest.CaptureFixture) -> None:
+    out = recording / "scores.json"
+    assert main(args(recording, "--hypotheses", "5", "--json", str(out))) == 0
+    assert json.loads(out.read_text())["tracker"]["hypotheses"] == 5
+    printed = capsys.readouterr().out
+    assert "5 hypotheses over 2 s" in printed and "settled: as decided 2 s later, then one update late" in printed
+    assert main(args(recording, "--json", str(out))) == 0  # the site's own: one
+    assert json.loads(out.read_text())["tracker"]["hypotheses"] == 1 and "hypotheses" not in capsys.readouterr().out
+
+
 def test_the_area_leaves_out_unmatched_tracks_beyond_it(recording: Path, tmp_path: Path) -> None:
     # the walkers stand at y = -2, 0, 2 m: an area around the first one scores only them
     out = tmp_path / "area.json"
@@ -87,6 +97,8 @@ def test_the_area_leaves_out_unmatched_tracks_beyond_it(recording: Path, tmp_pat
         (None, ("--perturb", "2", "--perturb-drop", "1"), "--perturb-drop, --perturb-jitter: drop must be a probability in [0, 1)"),
         (None, ("--perturb", "2", "--perturb-jitter", "nan"), "--perturb-drop, --perturb-jitter: jitter_px must be a number of pixels >= 0"),
         (None, ("--ideal-noise", "-0.1"), "--ideal-noise must be a number of metres >= 0"),
+        (None, ("--hypotheses", "0"), "--hypotheses must be a whole number from 1 to 100, got 0"),
+        (None, ("--hypotheses", "101"), "--hypotheses must be a whole number from 1 to 100, got 101"),
         ("missing camera", (), "CVLab2.txt: no detections file for camera 'CVLab2'"),
         ("bad row", (), "CVLab1.txt:3: 'wide' is not a number"),
         ("bad truth", (), "truth.txt:1: expected at least 4"),
