@@ -14,7 +14,9 @@ Scores (matched within ``threshold_m`` on the floor):
 
 - the online tracks, as the tracker service publishes them: CLEAR-MOT, IDF1 and detection scores
   (``bevflow.metrics.tracking``) and HOTA (``bevflow.metrics.hota``);
-- ``settled``: the same tracker's output one update late (``bevflow.tracking.settled``);
+- ``settled``: the same tracker's output one update late (``bevflow.tracking.settled``), after
+  what several hypotheses (``bevflow.tracking.hypotheses``) decided a window later where the site
+  holds them;
 - ``detection``: each frame's fused cylinders on their own, before tracking.
 
 Area: the tracker sees everything, but estimates outside ``area`` that match nobody are neither
@@ -154,7 +156,7 @@ class _Run:
     def step(self, frame: int, time_s: float, per_camera: dict[str, Cylinders], gt: Frame | None) -> None:
         result = self.site_tracker.step(round(time_s * 1e9), per_camera)
         self.tracks.append((frame, result.table))
-        self._settle(final_updates(self.site_tracker.tracker, time_s))
+        self.settled += self.late.push_each(final_updates(self.site_tracker.tracker, time_s))
         if gt is None:
             return
         if self.scored_from is None:
@@ -163,14 +165,8 @@ class _Run:
         fused = result.fusion.fused.xy
         self.fused.append(fused[scored_estimates(self.area, gt[1], fused, self.threshold_m)])
 
-    def _settle(self, final: list[tuple[float, TrackTable]]) -> None:
-        """Pass the updates the tracker made final to the one-update-late output."""
-        for time_s, tracks in final:
-            if (settled := self.late.push(tracks, time_s)) is not None:
-                self.settled.append(settled.tracks)
-
     def finish(self, frame_numbers: tuple[int, ...], fps: float, min_confidence: float) -> ReplayEvaluation:
-        self._settle(last_updates(self.site_tracker.tracker))
+        self.settled += self.late.push_each(last_updates(self.site_tracker.tracker))
         if (settled := self.late.flush()) is not None:
             self.settled.append(settled.tracks)
         start = self.scored_from or 0

@@ -197,12 +197,8 @@ def track_and_match_both(
     late = SettledTracks()
     for cylinders, seen, time_s in zip(fused, sightings, times_s, strict=True):
         online.append(tracker.update(cylinders, time_s, seen))
-        for final_s, tracks in final_updates(tracker, time_s):
-            if (frame := late.push(tracks, final_s)) is not None:
-                settled.append(frame.tracks)
-    for final_s, tracks in last_updates(tracker):
-        if (frame := late.push(tracks, final_s)) is not None:
-            settled.append(frame.tracks)
+        settled += late.push_each(final_updates(tracker, time_s))
+    settled += late.push_each(last_updates(tracker))
     if (frame := late.flush()) is not None:
         settled.append(frame.tracks)
     gt_out = [(np.asarray(ids, dtype=np.int64), np.asarray(feet, dtype=np.float64)) for ids, feet in gt]

@@ -75,6 +75,12 @@ class SettledTracks:
         self._before, self._pending = self._pending, update
         return settled
 
+    def push_each(self, updates: list[tuple[float, TrackTable]]) -> list[TrackTable]:
+        """``push`` each (time, tracks) of ``updates`` in turn (what a tracker made final:
+        ``bevflow.tracking.hypotheses.final_updates``); the tracks of what they settled."""
+        settled = (self.push(tracks, time_s) for time_s, tracks in updates)
+        return [frame.tracks for frame in settled if frame is not None]
+
     def flush(self) -> SettledFrame | None:
         """The last update pushed, settled without a next one (its matched tracks only); None if
         there is none. The next push starts afresh."""

@@ -96,6 +96,19 @@ def test_flush_starts_afresh() -> None:
     assert late.push(tracker.tracks(include_tentative=True), 0.5) is None  # nothing held over
 
 
+def test_push_each_pushes_in_turn_and_keeps_what_was_settled() -> None:
+    tracker, updates = Tracker(TrackerConfig(activate_hits=1)), []
+    for t, xy in zip((0.0, 0.5, 1.0), WALKER, strict=False):
+        tracker.update(Cylinders(xy=xy), t)
+        updates.append((t, tracker.tracks(include_tentative=True)))
+    one_by_one, late = SettledTracks(), SettledTracks()
+    expected = [frame.tracks for t, tracks in updates if (frame := one_by_one.push(tracks, t)) is not None]
+    got = late.push_each(updates)
+    assert len(got) == len(expected) == 2 and late.push_each([]) == []
+    assert [g.id.tolist() for g in got] == [e.id.tolist() for e in expected]
+    assert late.flush().tracks.id.tolist() == one_by_one.flush().tracks.id.tolist() == [1]
+
+
 def test_every_track_has_a_key_of_its_own_for_the_life_of_the_tracker() -> None:
     tracker = Tracker(TrackerConfig(activate_hits=2))
     tracker.update(Cylinders(xy=[[0.0, 0.0], [5.0, 0.0]]), 0.0)
