@@ -19,9 +19,11 @@ shown who was who, but the swap is already made. ``HypothesisTracker`` keeps up 
 
 What the tracker reports is the best hypothesis's tracks at each update. When another hypothesis
 overtakes it, the reported ids follow the better explanation of the last few seconds: a track may
-change id, which is the swap undone. Ids come from one counter for all hypotheses
-(``Tracker.copy``), so an id is never given to two tracks, though one given in a hypothesis that
-is later dropped is never seen again.
+change id, which is the swap undone. Inside, ids come from one counter for all hypotheses
+(``Tracker.copy``), so no id is ever given to two tracks; most belong to hypotheses that lose.
+What is reported carries ids of its own (``_PublishedIds``), given in sequence from ``first_id``
+as each track is first reported, so that the ids a site sees count its people, not its
+hypotheses (on CMC2 the hypotheses confirm about ten tracks for each one reported).
 
 Fusion takes the best hypothesis's predictions as its priors (``bevflow.live.site_tracker``):
 fusing once per hypothesis scored the same on CMC2 at many times the cost.
@@ -35,7 +37,10 @@ site asks for it (``Thresholds.track_hypotheses``) for rooms of tens of people.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+
+import numpy as np
 
 from bevflow.detections import Cylinders
 from bevflow.tracking.tracker import Tracker, TrackerConfig, TrackTable
@@ -71,13 +76,39 @@ class _Hypothesis:
     decision: _Decision
 
 
+@dataclass(eq=False)
+class _PublishedIds:
+    """Reported ids: the next in sequence for each hypothesis's id when a track is first reported
+    (``ids``: hypothesis id → reported id). Ids of tracks no hypothesis holds any more are
+    forgotten once the table has doubled since it was last cut back."""
+
+    next_id: int
+    ids: dict[int, int] = field(default_factory=dict)
+    kept: int = 0
+
+    def publish(self, tracks: TrackTable) -> TrackTable:
+        own = tracks.id.tolist()
+        for i in own:
+            if i >= 0 and i not in self.ids:
+                self.ids[i], self.next_id = self.next_id, self.next_id + 1
+        return replace(tracks, id=np.array([self.ids[i] if i >= 0 else -1 for i in own], dtype=np.int64))
+
+    def forget_unless(self, held: Callable[[], set[int]]) -> None:
+        """Forget the ids not in ``held()`` (asked only when the table is due to be cut back)."""
+        if len(self.ids) > 2 * self.kept + 256:
+            still = held()
+            self.ids = {i: published for i, published in self.ids.items() if i in still}
+            self.kept = len(self.ids)
+
+
 class HypothesisTracker:
     """The online tracker's interface over several hypotheses; see the module docstring."""
 
     def __init__(self, config: TrackerConfig | None = None, first_id: int = 1) -> None:
         self.config = config or TrackerConfig()
-        self._hypotheses = [_Hypothesis(0.0, Tracker(self.config, first_id), _Decision(float("-inf"), None, None))]
+        self._hypotheses = [_Hypothesis(0.0, Tracker(self.config), _Decision(float("-inf"), None, None))]
         self._final: list[tuple[float, TrackTable]] = []
+        self._published = _PublishedIds(int(first_id))
 
     @property
     def best(self) -> Tracker:
@@ -86,7 +117,8 @@ class HypothesisTracker:
 
     @property
     def next_id(self) -> int:
-        return self.best.next_id
+        """The id the next track reported will get (pass it as ``first_id`` on restart)."""
+        return self._published.next_id
 
     @property
     def time_s(self) -> float | None:
@@ -94,11 +126,12 @@ class HypothesisTracker:
 
     def reset(self) -> None:
         """Forget every track, hypothesis and the clock; ids keep counting from where they were."""
-        self._hypotheses = [_Hypothesis(0.0, Tracker(self.config, self.next_id), _Decision(float("-inf"), None, None))]
+        self._hypotheses = [_Hypothesis(0.0, Tracker(self.config), _Decision(float("-inf"), None, None))]
         self._final = []
+        self._published = _PublishedIds(self.next_id)
 
     def tracks(self, include_tentative: bool = False) -> TrackTable:
-        return self.best.tracks(include_tentative)
+        return self._published.publish(self.best.tracks(include_tentative))
 
     def predicted(self, time_s: float, include_tentative: bool = False) -> Cylinders:
         return self.best.predicted(time_s, include_tentative)
@@ -116,7 +149,8 @@ class HypothesisTracker:
         kept = [child for child in children[: self.config.hypotheses] if child[0].cost - least <= KEEP]
         self._hypotheses = [hypothesis for hypothesis, _ in kept]
         self._settle(float(time_s) - self.config.hypothesis_window_s)
-        return kept[0][1]
+        self._published.forget_unless(self._held_ids)
+        return self._published.publish(kept[0][1])
 
     def final(self) -> list[tuple[float, TrackTable]]:
         """The updates made final since the last call, oldest first: (time, every track after
@@ -144,11 +178,23 @@ class HypothesisTracker:
             node = node.before
         for decision in reversed(newly):
             if decision.tracker is not None:
-                self._final.append((decision.time_s, decision.tracker.tracks(include_tentative=True)))
+                tracks = decision.tracker.tracks(include_tentative=True)
+                self._final.append((decision.time_s, self._published.publish(tracks)))
         settled.before = None
         least = self._hypotheses[0].cost
         for hypothesis in self._hypotheses:
             hypothesis.cost -= least
+
+
+    def _held_ids(self) -> set[int]:
+        """The ids of every track a hypothesis holds, or held at an update not yet final."""
+        held: set[int] = set()
+        for hypothesis in self._hypotheses:
+            decision: _Decision | None = hypothesis.decision
+            while decision is not None and decision.tracker is not None:
+                held.update(decision.tracker.tracks(include_tentative=True).id.tolist())
+                decision = decision.before
+        return held
 
 
 def online_tracker(config: TrackerConfig, first_id: int = 1) -> Tracker | HypothesisTracker:

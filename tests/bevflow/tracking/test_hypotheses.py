@@ -8,7 +8,7 @@ import pytest
 
 from bevflow.detections import Cylinders
 from bevflow.site import Thresholds
-from bevflow.tracking.hypotheses import HypothesisTracker, online_tracker
+from bevflow.tracking.hypotheses import HypothesisTracker, _PublishedIds, online_tracker
 from bevflow.tracking.tracker import Tracker, TrackerConfig
 
 FPS = 4.0
@@ -72,14 +72,18 @@ def test_every_update_is_made_final_once_in_order_a_window_late() -> None:
 def test_an_id_is_never_given_to_two_tracks(seed: int) -> None:
     tracker = HypothesisTracker(TrackerConfig(hypotheses=10, activate_hits=2), first_id=50)
     key_of: dict[int, int] = {}
+    reported: set[int] = set()
     for k, cylinders in enumerate(_crowd(seed)):
         table = tracker.update(cylinders, k / FPS)
         assert len(set(table.id.tolist())) == len(table)
+        reported.update(table.id.tolist())
         for _, tracks in tracker.final():
             for i, key in zip(tracks.id.tolist(), tracks.key.tolist(), strict=True):
                 if i >= 0:
                     assert key_of.setdefault(i, key) == key
-    assert min(key_of) >= 50 and tracker.next_id > max(key_of)
+                    reported.add(i)
+    # reported ids count the tracks reported, from first_id on, whatever the hypotheses spent
+    assert sorted(reported) == list(range(50, tracker.next_id)) and set(key_of) <= reported
 
 
 def test_reset_forgets_tracks_but_keeps_counting_ids() -> None:
@@ -121,3 +125,14 @@ def test_branching_leaves_the_tracker_where_it_was_and_copies_share_the_ids() ->
     assert born[0] == [3] and born[1] == [4]  # one counter for every copy
     with pytest.raises(ValueError, match="gate_chi2"):
         Tracker(TrackerConfig(gate_chi2=None)).branch(Cylinders.empty(), 0.0, None, count=2, within=1.0)
+
+
+def test_reported_ids_of_tracks_no_hypothesis_holds_are_forgotten_once_the_table_doubles() -> None:
+    published = _PublishedIds(next_id=1)
+    table = Tracker(TrackerConfig(activate_hits=1)).update(Cylinders(xy=np.zeros((300, 2)) + np.arange(300)[:, None]), 0.0)
+    assert published.publish(table).id.tolist() == list(range(1, 301))
+    asked = []
+    published.forget_unless(lambda: asked.append(1) or {1, 2})
+    assert asked == [1] and published.ids == {1: 1, 2: 2}
+    published.forget_unless(lambda: asked.append(1) or set())  # not due: 2 entries, kept 2
+    assert asked == [1] and published.publish(table[:3]).id.tolist() == [1, 2, 301]
