@@ -23,7 +23,7 @@ change id, which is the swap undone. Inside, ids come from one counter for all h
 (``Tracker.copy``), so no id is ever given to two tracks; most belong to hypotheses that lose.
 What is reported carries ids of its own (``_PublishedIds``), given in sequence from ``first_id``
 as each track is first reported, so that the ids a site sees count its people, not its
-hypotheses (on CMC2 the hypotheses confirm about ten tracks for each one reported).
+hypotheses (replaying CMC2 with 20, they confirmed 535 tracks, of which 30 were reported).
 
 Fusion takes the best hypothesis's predictions as its priors (``bevflow.live.site_tracker``):
 fusing once per hypothesis scored the same on CMC2 at many times the cost.
