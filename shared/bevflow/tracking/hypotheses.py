@@ -50,8 +50,8 @@ BRANCHES = 5
 
 MARGIN = 6.0
 """How much more (twice the negative log-likelihood) a runner-up may cost than the best choice: a
-likelihood ratio of e⁻³. On CMC2's recording and six copies 3, 6 and 20 scored alike (IDF1 0.618, 0.624, 0.612);
-the wider, the more children in a calm crowd."""
+likelihood ratio of e⁻³. On CMC2's recording and six copies 3, 6 and 20 scored alike (IDF1 0.618,
+0.624, 0.612); the wider, the more children in a calm crowd."""
 
 KEEP = 6.0
 """How much more a hypothesis may cost than the best one and still be kept. 6 and 12 scored alike
@@ -184,7 +184,6 @@ class HypothesisTracker:
         least = self._hypotheses[0].cost
         for hypothesis in self._hypotheses:
             hypothesis.cost -= least
-
 
     def _held_ids(self) -> set[int]:
         """The ids of every track a hypothesis holds, or held at an update not yet final."""
