@@ -31,7 +31,7 @@ fusing once per hypothesis scored the same on CMC2 at many times the cost.
 On CMC2 (``docs/RESULTS.md``; four side cameras, 10 people at 4 fps) 20 hypotheses raised the
 six perturbed copies' IDF1 0.529 → 0.610 and MOTA 0.862 → 0.877 (the output decided 2 s late:
 0.619 and 0.902), and the tracker alone on the truth moved by 0.1 m IDF1 0.631 → 0.765. The work
-grows with hypotheses × people: about 30 times the plain tracker's for 100 people or more, so a
+grows with hypotheses × people: 16–33 times the plain tracker's for 100 to 1000 people, so a
 site asks for it (``Thresholds.track_hypotheses``) for rooms of tens of people.
 """
 
