@@ -238,6 +238,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--profile", action="store_true",
                         help="profile the timed steps of the first case (cProfile, thread CPU time) instead of timing")
     args = parser.parse_args(argv)
+    if not 1 <= args.hypotheses <= 100:
+        parser.error(f"--hypotheses must be a whole number from 1 to 100, got {args.hypotheses}")
     if args.profile:
         import pstats
 

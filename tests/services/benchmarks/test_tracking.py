@@ -13,6 +13,7 @@ from bevflow_services.benchmarks.tracking import (
     MONITORED_RADIUS_M,
     bench_tick,
     grid_site,
+    main,
     observe,
     stage_clock,
     walk,
@@ -112,3 +113,9 @@ def test_projector_covariance_is_attached_to_every_camera() -> None:
 def test_bench_tick_refuses_an_unknown_covariance_source() -> None:
     with pytest.raises(ValueError, match="covariance must be one of"):
         bench_tick(people=5, cameras=4, ticks=1, warmup=1, covariance="nowhere")
+
+
+def test_hypotheses_outside_the_site_files_range_are_refused(capsys: pytest.CaptureFixture) -> None:
+    with pytest.raises(SystemExit):
+        main(["--hypotheses", "0"])
+    assert "--hypotheses must be a whole number from 1 to 100, got 0" in capsys.readouterr().err
