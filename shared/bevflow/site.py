@@ -224,7 +224,8 @@ class Thresholds(_Strict):
     track_hypotheses: Annotated[int, Field(ge=1, le=100)] = Field(
         default=1, description="ways of matching tracks to people held open for two seconds before deciding "
         "(bevflow.tracking.hypotheses); 1 decides at every update. 20 holds identities better in a dense room "
-        "(docs/RESULTS.md, CMC2), at up to 30 times the tracker's work per update: for rooms of tens of people")
+        "(docs/RESULTS.md, CMC2), at 16–33 times the tracker's work per update from 100 people on: for rooms "
+        "of tens of people")
 
 
 class BusTls(_Strict):
