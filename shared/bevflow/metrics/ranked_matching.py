@@ -82,10 +82,11 @@ def ranked_matchings(
             if (extra := 2.0 * unmatched_cost - float(cost[group[0]])) <= within:
                 runners_up.append((extra, rows[group], _NONE, _NONE))
             continue
-        if len(np.unique(rows[group])) + len(np.unique(cols[group])) > LARGEST_GROUP:
+        group_rows = np.unique(rows[group])
+        if len(group_rows) + len(np.unique(cols[group])) > LARGEST_GROUP:
             continue
         for extra, r, c in _ranked_group(rows[group], cols[group], cost[group], chosen, unmatched_cost, count, within):
-            runners_up.append((extra, np.unique(rows[group]), r, c))
+            runners_up.append((extra, group_rows, r, c))
     runners_up.sort(key=lambda item: item[0])
     out = [best]
     for extra, group_rows, r, c in runners_up[: count - 1]:

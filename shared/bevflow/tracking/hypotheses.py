@@ -139,18 +139,17 @@ class HypothesisTracker:
     def update(self, cylinders: Cylinders, time_s: float, sightings: Cylinders | None = None) -> TrackTable:
         """As ``Tracker.update``: the best hypothesis's tracks after every hypothesis took the
         cylinders seen at ``time_s``."""
-        children: list[tuple[_Hypothesis, TrackTable]] = []
-        for parent in self._hypotheses:
-            for choice, tracker, table in parent.tracker.branch(cylinders, time_s, sightings, BRANCHES, MARGIN):
-                decision = _Decision(float(time_s), tracker, parent.decision)
-                children.append((_Hypothesis(parent.cost + choice.cost, tracker, decision), table))
-        children.sort(key=lambda child: child[0].cost)
-        least = children[0][0].cost
-        kept = [child for child in children[: self.config.hypotheses] if child[0].cost - least <= KEEP]
-        self._hypotheses = [hypothesis for hypothesis, _ in kept]
+        children = [
+            _Hypothesis(parent.cost + choice.cost, tracker, _Decision(float(time_s), tracker, parent.decision))
+            for parent in self._hypotheses
+            for choice, tracker in parent.tracker.branch(cylinders, time_s, BRANCHES, MARGIN)
+        ]
+        children.sort(key=lambda child: child.cost)
+        least = children[0].cost
+        self._hypotheses = [child for child in children[: self.config.hypotheses] if child.cost - least <= KEEP]
         self._settle(float(time_s) - self.config.hypothesis_window_s)
         self._published.forget_unless(self._held_ids)
-        return self._published.publish(kept[0][1])
+        return self._published.publish(self.best.report(sightings))
 
     def final(self) -> list[tuple[float, TrackTable]]:
         """The updates made final since the last call, oldest first: (time, every track after

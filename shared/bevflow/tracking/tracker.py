@@ -371,14 +371,14 @@ class Tracker:
         ``sightings``: views that placed nobody (``Fusion.sightings``, with covariances), used
         only by ``coast_needs_sighting``."""
         dt = self._predict(time_s)
-        return self._update(cylinders, time_s, sightings, dt, self._candidates(cylinders), None)
+        self._update(cylinders, time_s, dt, self._candidates(cylinders), None)
+        return self.report(sightings)
 
-    def branch(
-        self, cylinders: Cylinders, time_s: float, sightings: Cylinders | None, count: int, within: float
-    ) -> list[tuple[Choice, Tracker, TrackTable]]:
+    def branch(self, cylinders: Cylinders, time_s: float, count: int, within: float) -> list[tuple[Choice, Tracker]]:
         """``update`` made on copies of this tracker, one per way of matching the confirmed tracks
         to the strong detections: the best and up to ``count`` − 1 runners-up costing at most
-        ``within`` more (``bevflow.metrics.ranked_matching``); this tracker is not moved.
+        ``within`` more (``bevflow.metrics.ranked_matching``); this tracker is not moved. What a
+        copy reports is its ``report``, built only for the copies that are asked.
 
         Costed by negative log-likelihood (twice it, less constants): d² + ln |S| a pair (module
         docstring), and (``gate_chi2`` + ln |S₀|) / 2 a track or detection left over, S₀ the
@@ -395,7 +395,8 @@ class Tracker:
         out = []
         for choice in moved._choices(len(cylinders), candidates, chi2, count, within):
             child = moved.copy()
-            out.append((choice, child, child._update(cylinders, time_s, sightings, dt, candidates, choice)))
+            child._update(cylinders, time_s, dt, candidates, choice)
+            out.append((choice, child))
         return out
 
     def _choices(self, n_detections: int, candidates: _Passes, chi2: float, count: int, within: float) -> list[Choice]:
@@ -411,17 +412,13 @@ class Tracker:
         track, det, cost = pairs.track[allowed], pairs.det[allowed], cost[allowed]
         ranked = ranked_matchings(track, det, cost, len(confirmed), n_detections, leftover, count, within)
         best = ranked[0]
-        key = track * n_detections + det
-        order = np.argsort(key)
-        paid = cost[order[np.searchsorted(key, best.rows * n_detections + best.cols, sorter=order)]].sum()
-        left = int(confirmed.sum()) + int(strong.sum()) - 2 * len(best.rows)
-        base = float(paid) + leftover * left
+        taken_by = np.full(len(confirmed), -1, dtype=np.int64)
+        taken_by[best.rows] = best.cols
+        paid = float(cost[taken_by[track] == det].sum())
+        base = paid + leftover * (int(confirmed.sum()) + int(strong.sum()) - 2 * len(best.rows))
         return [Choice(m.rows, m.cols, base + m.extra) for m in ranked]
 
-    def _update(
-        self, cylinders: Cylinders, time_s: float, sightings: Cylinders | None, dt: float, candidates: _Passes,
-        choice: Choice | None,
-    ) -> TrackTable:  # fmt: skip
+    def _update(self, cylinders: Cylinders, time_s: float, dt: float, candidates: _Passes, choice: Choice | None) -> None:
         """``update`` after the prediction: the association passes (the first one as ``choice``
         has it, where given), the filters' correction, confirmations, retirements and births."""
         cfg = self.config
@@ -446,11 +443,16 @@ class Tracker:
         self._confirm()
         self._retire()
         self._birth(cylinders, strong & ~taken, time_s)
+
+    def report(self, sightings: Cylinders | None = None) -> TrackTable:
+        """The confirmed tracks the last update reports (see ``TrackerConfig.report_max_misses``;
+        ``sightings`` as for ``update``): what ``update`` returns."""
+        cfg = self.config
         report = self._tracks.confirmed & (self._tracks.misses <= cfg.report_max_misses)
         if cfg.coast_needs_sighting:
             coasting = np.flatnonzero(report & (self._tracks.misses > 0))
             report[coasting] = self._sighted(coasting, sightings)
-        return self._tracks.select(report).table(time_s)
+        return self._tracks.select(report).table(self._time_s if self._time_s is not None else 0.0)
 
     def _predict(self, time_s: float) -> float:
         """Move the clock and every track to ``time_s``; the seconds since the last update."""

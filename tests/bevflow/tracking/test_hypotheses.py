@@ -117,14 +117,14 @@ def test_branching_leaves_the_tracker_where_it_was_and_copies_share_the_ids() ->
     tracker = Tracker(TrackerConfig(activate_hits=1))
     tracker.update(Cylinders(xy=[[0.0, 0.0], [0.5, 0.0]]), 0.0)
     before = tracker.tracks(include_tentative=True)
-    branches = tracker.branch(Cylinders(xy=[[0.25, 0.0], [0.3, 0.0], [3.0, 3.0]]), 0.25, None, count=5, within=50.0)
+    branches = tracker.branch(Cylinders(xy=[[0.25, 0.0], [0.3, 0.0], [3.0, 3.0]]), 0.25, count=5, within=50.0)
     after = tracker.tracks(include_tentative=True)
     assert tracker.time_s == 0.0 and np.array_equal(before.xy, after.xy)
-    assert len(branches) > 1 and [c.cost for c, _, _ in branches] == sorted(c.cost for c, _, _ in branches)
-    born = [table.id[table.detection == 2].tolist() for _, _, table in branches]
+    assert len(branches) > 1 and [c.cost for c, _ in branches] == sorted(c.cost for c, _ in branches)
+    born = [(table := child.report()).id[table.detection == 2].tolist() for _, child in branches]
     assert born[0] == [3] and born[1] == [4]  # one counter for every copy
     with pytest.raises(ValueError, match="gate_chi2"):
-        Tracker(TrackerConfig(gate_chi2=None)).branch(Cylinders.empty(), 0.0, None, count=2, within=1.0)
+        Tracker(TrackerConfig(gate_chi2=None)).branch(Cylinders.empty(), 0.0, count=2, within=1.0)
 
 
 def test_reported_ids_of_tracks_no_hypothesis_holds_are_forgotten_once_the_table_doubles() -> None:
