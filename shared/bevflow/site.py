@@ -222,10 +222,10 @@ class Thresholds(_Strict):
     track_max_misses: Annotated[int, Field(ge=1)] = 5
     track_gate_m: PositiveFloat = 1.5
     track_hypotheses: Annotated[int, Field(ge=1, le=100)] = Field(
-        default=1, description="ways of matching tracks to people held open for two seconds before deciding "
+        default=20, description="ways of matching tracks to people held open for two seconds before deciding "
         "(bevflow.tracking.hypotheses); 1 decides at every update. 20 holds identities better in a dense room "
-        "(docs/RESULTS.md, CMC2), at 16–33 times the tracker's work per update from 100 people on: for rooms "
-        "of tens of people")
+        "(docs/RESULTS.md, CMC2). Past 2,000 tracks divided by this number (100 for 20) fewer are held, one from "
+        "2,000 tracks, so that the work per update stays a few times that of deciding at once")
 
 
 class BusTls(_Strict):

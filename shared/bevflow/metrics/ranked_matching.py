@@ -30,8 +30,6 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from bevflow.metrics.matching import assign_edges
 
@@ -55,6 +53,21 @@ class Matching:
     extra: float
 
 
+@dataclass(frozen=True, eq=False)
+class GroupChoice:
+    """Another matching of one group, whose rows are ``group_rows``: its rows ``rows`` take the
+    columns ``cols``, at ``extra`` more than the group's part of the best matching."""
+
+    extra: float
+    group_rows: IntArray
+    rows: IntArray
+    cols: IntArray
+
+
+RankingMemo = dict[tuple[object, ...], list[GroupChoice]]
+"""Groups' rankings by their pairs, costs and best choice (``ranked_matchings``' ``memo``)."""
+
+
 def ranked_matchings(
     rows: IntArray,
     cols: IntArray,
@@ -64,10 +77,13 @@ def ranked_matchings(
     unmatched_cost: float,
     count: int,
     within: float,
+    memo: RankingMemo | None = None,
 ) -> list[Matching]:
     """The best matching of the allowed pairs (``rows[k], cols[k], cost[k]``, each pair at most
     once, every cost below 2u), then up to ``count`` − 1 runners-up costing at most ``within``
-    more, cheapest first; each runner-up differs from the best in one connected group."""
+    more, cheapest first; each runner-up differs from the best in one connected group.
+    ``memo``: each group's ranking by its pairs, costs and best choice, shared by calls whose
+    problems repeat groups (the hypotheses of one update mostly hold the same tracks)."""
     if count < 1:
         raise ValueError(f"count must be >= 1, got {count}")
     best_rows, best_cols = assign_edges(rows, cols, cost, n_rows, n_cols, unmatched_cost)
@@ -76,46 +92,69 @@ def ranked_matchings(
         return [best]
     chosen = np.full(n_rows, -1, dtype=np.int64)
     chosen[best_rows] = best_cols
-    runners_up: list[tuple[float, IntArray, IntArray, IntArray]] = []
-    for group in _groups(rows, cols, n_rows, n_cols):
-        if len(group) == 1:  # most groups: the one other choice is to leave the pair unmatched
-            if (extra := 2.0 * unmatched_cost - float(cost[group[0]])) <= within:
-                runners_up.append((extra, rows[group], _NONE, _NONE))
-            continue
-        group_rows = np.unique(rows[group])
-        if len(group_rows) + len(np.unique(cols[group])) > LARGEST_GROUP:
-            continue
-        for extra, r, c in _ranked_group(rows[group], cols[group], cost[group], chosen, unmatched_cost, count, within):
-            runners_up.append((extra, group_rows, r, c))
-    runners_up.sort(key=lambda item: item[0])
+    runners_up: list[GroupChoice] = []
+    lone, groups = _groups(rows, cols, n_rows, n_cols)
+    # Most groups are one pair, whose one other choice is to leave it unmatched: 2u less its cost.
+    lone_extra = 2.0 * unmatched_cost - cost[lone]
+    for k in np.flatnonzero(lone_extra <= within).tolist():
+        runners_up.append(GroupChoice(float(lone_extra[k]), rows[lone[k] : lone[k] + 1], _NONE, _NONE))
+    memo = {} if memo is None else memo
+    for group in groups:
+        key = (rows[group].tobytes(), cols[group].tobytes(), cost[group].tobytes(), chosen[rows[group]].tobytes(),
+               unmatched_cost, count, within)  # fmt: skip
+        if (ranked := memo.get(key)) is None:
+            ranked = memo[key] = _ranked_group(rows[group], cols[group], cost[group], chosen, unmatched_cost, count, within)
+        runners_up += ranked
+    runners_up.sort(key=lambda choice: choice.extra)
     out = [best]
-    for extra, group_rows, r, c in runners_up[: count - 1]:
-        keep = ~np.isin(best_rows, group_rows)
-        pair_rows, pair_cols = np.concatenate([best_rows[keep], r]), np.concatenate([best_cols[keep], c])
+    for choice in runners_up[: count - 1]:
+        in_group = np.zeros(n_rows, dtype=bool)
+        in_group[choice.group_rows] = True
+        keep = ~in_group[best_rows]
+        pair_rows, pair_cols = np.concatenate([best_rows[keep], choice.rows]), np.concatenate([best_cols[keep], choice.cols])
         order = np.argsort(pair_rows, kind="stable")
-        out.append(Matching(pair_rows[order], pair_cols[order], extra))
+        out.append(Matching(pair_rows[order], pair_cols[order], choice.extra))
     return out
 
 
-def _groups(rows: IntArray, cols: IntArray, n_rows: int, n_cols: int) -> list[IntArray]:
-    """The allowed pairs' indices, split by connected group of rows and columns."""
-    n = n_rows + n_cols
-    graph = coo_matrix((np.ones(len(rows)), (rows, n_rows + cols)), shape=(n, n))
-    _, label = connected_components(graph, directed=False)
-    pair_label = label[rows]
-    order = np.argsort(pair_label, kind="stable")
-    starts = np.flatnonzero(np.diff(pair_label[order], prepend=-1))
-    return np.split(order, starts[1:])
+def _groups(rows: IntArray, cols: IntArray, n_rows: int, n_cols: int) -> tuple[IntArray, list[IntArray]]:
+    """The allowed pairs split by connected group of rows and columns: the indices of the pairs
+    alone in their group, and the indices of each larger group."""
+    pair_label = _pair_labels(rows, n_rows + cols, n_rows + n_cols)
+    size = np.bincount(pair_label)[pair_label]
+    lone = np.flatnonzero(size == 1)
+    shared = np.flatnonzero(size > 1)
+    order = shared[np.argsort(pair_label[shared], kind="stable")]
+    starts = np.flatnonzero(np.diff(pair_label[order], prepend=-1)).tolist() + [len(order)]
+    return lone, [order[a:b] for a, b in zip(starts[:-1], starts[1:], strict=True)]
 
 
-def _ranked_group(
-    rows: IntArray, cols: IntArray, cost: FloatArray, chosen: IntArray, unmatched: float, count: int, within: float
-) -> list[tuple[float, IntArray, IntArray]]:
+def _pair_labels(a: IntArray, b: IntArray, n: int) -> IntArray:
+    """Each edge (a[k], b[k]) of a graph of ``n`` nodes labelled by the least node of its connected
+    component: every node takes the least label of its edges' ends, then follows its label's
+    label, until nothing changes (a few rounds for the short chains of people near each other)."""
+    label = np.arange(n)
+    while True:
+        least = np.minimum(label[a], label[b])
+        moved = label.copy()
+        np.minimum.at(moved, a, least)
+        np.minimum.at(moved, b, least)
+        moved = moved[moved]
+        if np.array_equal(moved, label):
+            return label[a]
+        label = moved
+
+
+def _ranked_group(rows: IntArray, cols: IntArray, cost: FloatArray, chosen: IntArray, unmatched: float, count: int,
+                  within: float) -> list[GroupChoice]:  # fmt: skip
     """Up to ``count`` − 1 matchings of one group other than its part of the best (``chosen``:
-    each row's column there, −1 for none), as (extra cost, rows, cols), within ``within``."""
+    each row's column there, −1 for none), within ``within``; none for a group of more than
+    ``LARGEST_GROUP`` rows and columns."""
     row_ids, r = np.unique(rows, return_inverse=True)
     col_ids, c = np.unique(cols, return_inverse=True)
     n_r, n_c = len(row_ids), len(col_ids)
+    if n_r + n_c > LARGEST_GROUP:
+        return []
     # Padded square matrix: row i may stay unmatched in column n_c + i, column j in row n_r + j.
     matrix = np.full((n_r + n_c, n_c + n_r), _FORBIDDEN)
     matrix[r, c] = cost
@@ -125,14 +164,14 @@ def _ranked_group(
     in_best = chosen[row_ids]
     best_pick = np.where(in_best >= 0, np.searchsorted(col_ids, in_best), n_c + np.arange(n_r))
     best_total = float(matrix[np.arange(n_r), best_pick].sum()) + unmatched * (n_c - int((in_best >= 0).sum()))
-    out: list[tuple[float, IntArray, IntArray]] = []
+    out: list[GroupChoice] = []
     for total, pick in _murty(matrix, n_r, count):
         if np.array_equal(pick, best_pick):
             continue
         if total - best_total > within or len(out) == count - 1:
             break
         matched = pick < n_c
-        out.append((total - best_total, row_ids[matched], col_ids[pick[matched]]))
+        out.append(GroupChoice(total - best_total, row_ids, row_ids[matched], col_ids[pick[matched]]))
     return out
 
 

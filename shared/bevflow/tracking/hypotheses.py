@@ -30,9 +30,16 @@ fusing once per hypothesis scored the same on CMC2 at many times the cost.
 
 On CMC2 (``docs/RESULTS.md``; four side cameras, 10 people at 4 fps) 20 hypotheses raised the
 six perturbed copies' IDF1 0.529 → 0.610 and MOTA 0.862 → 0.877 (the output decided 2 s late:
-0.619 and 0.902), and the tracker alone on the truth moved by 0.1 m IDF1 0.631 → 0.765. The work
-grows with hypotheses × people: 16–33 times the plain tracker's for 100 to 1000 people, so a
-site asks for it (``Thresholds.track_hypotheses``) for rooms of tens of people.
+0.619 and 0.902), and the tracker alone on the truth moved by 0.1 m IDF1 0.631 → 0.765.
+
+The work grows with hypotheses × tracks, so it is kept down three ways: every choice is costed
+before any copy is made, and only the children kept are made (``Tracker.branch``); the hypotheses
+of one update share each group's ranking (``ranked_matchings``' memo), since they mostly hold the
+same tracks; and past ``HYPOTHESIS_TRACKS`` tracks, fewer hypotheses are kept (``room``). Timed
+at 10 fps on 16 cameras (``bevflow_services.benchmarks.tracking``), a site's tick with 20
+took 16–18 ms for 100 people against 2.7–2.8 with one, and 20–22 ms for 1,000 people (one
+hypothesis left) against 19–20; without the three, 63 and 740 ms in the same session. So 20 is
+a site's default (``Thresholds.track_hypotheses``).
 """
 
 from __future__ import annotations
@@ -43,6 +50,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from bevflow.detections import Cylinders
+from bevflow.metrics.ranked_matching import RankingMemo
 from bevflow.tracking.tracker import Tracker, TrackerConfig, TrackTable
 
 BRANCHES = 5
@@ -56,6 +64,11 @@ likelihood ratio of e⁻³. On CMC2's recording and six copies 3, 6 and 20 score
 KEEP = 6.0
 """How much more a hypothesis may cost than the best one and still be kept. 6 and 12 scored alike
 on CMC2's recording and six copies (IDF1 0.617, 0.624); 12 does a third more work."""
+
+HYPOTHESIS_TRACKS = 2000
+"""Tracks times hypotheses that one update may hold: a site tracking more than this divided by
+``TrackerConfig.hypotheses`` keeps fewer hypotheses (one from 2,000 tracks), so that the work per
+update stays within a few times the plain tracker's however many people there are."""
 
 
 @dataclass(eq=False)
@@ -139,17 +152,27 @@ class HypothesisTracker:
     def update(self, cylinders: Cylinders, time_s: float, sightings: Cylinders | None = None) -> TrackTable:
         """As ``Tracker.update``: the best hypothesis's tracks after every hypothesis took the
         cylinders seen at ``time_s``."""
-        children = [
-            _Hypothesis(parent.cost + choice.cost, tracker, _Decision(float(time_s), tracker, parent.decision))
-            for parent in self._hypotheses
-            for choice, tracker in parent.tracker.branch(cylinders, time_s, BRANCHES, MARGIN)
-        ]
-        children.sort(key=lambda child: child.cost)
-        least = children[0].cost
-        self._hypotheses = [child for child in children[: self.config.hypotheses] if child.cost - least <= KEEP]
+        room = self.room()
+        memo: RankingMemo = {}  # the hypotheses mostly hold the same tracks: each group ranked once
+        options = []
+        for parent in self._hypotheses:
+            branches = parent.tracker.branch(cylinders, time_s, BRANCHES if room > 1 else 1, MARGIN, memo)
+            options += [(parent.cost + choice.cost, parent, branches, choice) for choice in branches.choices]
+        options.sort(key=lambda option: option[0])
+        least = options[0][0]
+        self._hypotheses = []
+        for cost, parent, branches, choice in options[:room]:
+            if cost - least <= KEEP:  # only the children kept are made
+                tracker = branches.child(choice)
+                self._hypotheses.append(_Hypothesis(cost, tracker, _Decision(float(time_s), tracker, parent.decision)))
         self._settle(float(time_s) - self.config.hypothesis_window_s)
         self._published.forget_unless(self._held_ids)
         return self._published.publish(self.best.report(sightings))
+
+    def room(self) -> int:
+        """How many hypotheses the next update keeps: ``TrackerConfig.hypotheses``, fewer where
+        the best one holds more than ``HYPOTHESIS_TRACKS`` / ``hypotheses`` tracks, at least one."""
+        return max(1, min(self.config.hypotheses, HYPOTHESIS_TRACKS // max(len(self.best), 1)))
 
     def final(self) -> list[tuple[float, TrackTable]]:
         """The updates made final since the last call, oldest first: (time, every track after

@@ -67,7 +67,7 @@ from numpy.typing import NDArray
 from bevflow.detections import Cylinders
 from bevflow.matrix2 import determinant, mahalanobis2
 from bevflow.metrics.matching import assign_edges, gated_pairs
-from bevflow.metrics.ranked_matching import ranked_matchings
+from bevflow.metrics.ranked_matching import RankingMemo, ranked_matchings
 from bevflow.tracking.kalman import ConstantVelocityKalman, smooth
 
 if TYPE_CHECKING:  # the tracker reads a site's thresholds but needs no site to run
@@ -335,6 +335,10 @@ class Tracker:
         twin._tracks = _Tracks(**{f.name: getattr(self._tracks, f.name).copy() for f in fields(self._tracks)})
         return twin
 
+    def __len__(self) -> int:
+        """Live tracks, tentative ones included."""
+        return len(self._tracks)
+
     @property
     def next_id(self) -> int:
         """The id the next confirmed track will get (pass it as ``first_id`` on restart)."""
@@ -374,32 +378,32 @@ class Tracker:
         self._update(cylinders, time_s, dt, self._candidates(cylinders), None)
         return self.report(sightings)
 
-    def branch(self, cylinders: Cylinders, time_s: float, count: int, within: float) -> list[tuple[Choice, Tracker]]:
-        """``update`` made on copies of this tracker, one per way of matching the confirmed tracks
+    def branch(self, cylinders: Cylinders, time_s: float, count: int, within: float,
+               memo: RankingMemo | None = None) -> Branches:  # fmt: skip
+        """The ways this tracker may take an update, one per way of matching the confirmed tracks
         to the strong detections: the best and up to ``count`` − 1 runners-up costing at most
-        ``within`` more (``bevflow.metrics.ranked_matching``); this tracker is not moved. What a
-        copy reports is its ``report``, built only for the copies that are asked.
+        ``within`` more (``bevflow.metrics.ranked_matching``). ``Branches.child`` makes the copy
+        that took one (what it reports is its ``report``); this tracker is not moved. Choices are
+        costed before any copy is made, so a caller keeping a few of many makes only those.
 
         Costed by negative log-likelihood (twice it, less constants): d² + ln |S| a pair (module
         docstring), and (``gate_chi2`` + ln |S₀|) / 2 a track or detection left over, S₀ the
         filter's own measurement covariance: a pair is worth making when it is likelier than one
         at the gate's edge with the filter's nominal noise. ``update``'s own first pass prices a
         leftover relative to the pairs at hand instead; these costs compare across trackers whose
-        tracks differ. Needs the uncertainty gate (``gate_chi2``)."""
+        tracks differ. Needs the uncertainty gate (``gate_chi2``). ``memo``: rankings to share with
+        the other trackers branching on the same update (``ranked_matchings``)."""
         chi2 = self.config.gate_chi2
         if chi2 is None:
             raise ValueError("Tracker.branch needs the uncertainty gate: TrackerConfig.gate_chi2 is None")
         moved = self.copy()
         dt = moved._predict(time_s)
         candidates = moved._candidates(cylinders)
-        out = []
-        for choice in moved._choices(len(cylinders), candidates, chi2, count, within):
-            child = moved.copy()
-            child._update(cylinders, time_s, dt, candidates, choice)
-            out.append((choice, child))
-        return out
+        choices = moved._choices(len(cylinders), candidates, chi2, count, within, memo)
+        return Branches(choices, moved, cylinders, float(time_s), dt, candidates)
 
-    def _choices(self, n_detections: int, candidates: _Passes, chi2: float, count: int, within: float) -> list[Choice]:
+    def _choices(self, n_detections: int, candidates: _Passes, chi2: float, count: int, within: float,
+                 memo: RankingMemo | None) -> list[Choice]:  # fmt: skip
         """``branch``'s ranked matchings, for tracks already moved to the update's time."""
         strong, pairs = candidates.strong, candidates.pairs
         if pairs.d2 is None or pairs.log_det is None:
@@ -410,7 +414,7 @@ class Tracker:
         allowed = confirmed[pairs.track] & strong[pairs.det] & (pairs.dist <= self.config.gate_m)
         allowed &= cost < 2.0 * leftover
         track, det, cost = pairs.track[allowed], pairs.det[allowed], cost[allowed]
-        ranked = ranked_matchings(track, det, cost, len(confirmed), n_detections, leftover, count, within)
+        ranked = ranked_matchings(track, det, cost, len(confirmed), n_detections, leftover, count, within, memo)
         best = ranked[0]
         taken_by = np.full(len(confirmed), -1, dtype=np.int64)
         taken_by[best.rows] = best.cols
@@ -586,3 +590,22 @@ class Tracker:
         self._numbering.next_key += n
         self._tracks = self._tracks.append(born)
         self._confirm()
+
+
+@dataclass(frozen=True, eq=False)
+class Branches:
+    """What ``Tracker.branch`` found: the ``choices`` (cheapest first) of one tracker moved to the
+    update's time, each made into a tracker only when asked (``child``)."""
+
+    choices: list[Choice]
+    moved: Tracker
+    cylinders: Cylinders
+    time_s: float
+    dt: float
+    candidates: _Passes
+
+    def child(self, choice: Choice) -> Tracker:
+        """A copy of the moved tracker updated with ``choice`` (one of ``choices``)."""
+        child = self.moved.copy()
+        child._update(self.cylinders, self.time_s, self.dt, self.candidates, choice)
+        return child

@@ -6,6 +6,8 @@ import itertools
 
 import numpy as np
 import pytest
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from bevflow.metrics import ranked_matching
 from bevflow.metrics.ranked_matching import ranked_matchings
@@ -93,3 +95,28 @@ def test_a_group_past_the_largest_ranked_keeps_its_best_choice(monkeypatch) -> N
 def test_count_below_one_is_refused() -> None:
     with pytest.raises(ValueError, match="count"):
         ranked_matchings(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), 0, 0, U, count=0, within=1.0)
+
+
+@pytest.mark.parametrize(("seed", "share"), [(s, share) for s in range(6) for share in (0.05, 0.2, 0.6)])
+def test_groups_are_the_connected_components_of_the_pairs(seed: int, share: float) -> None:
+    rows, cols, _ = _problem(200 + seed, 30, 25, share)
+    n = 30 + 25
+    graph = coo_matrix((np.ones(len(rows)), (rows, 30 + cols)), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
+    lone, groups = ranked_matching._groups(rows, cols, 30, 25)
+    parts = [[int(k)] for k in lone] + [g.tolist() for g in groups]
+    assert sorted(k for part in parts for k in part) == list(range(len(rows)))  # each pair once
+    assert all(len(set(label[rows[part]])) == 1 for part in parts)  # a part lies in one component
+    assert len({label[rows[part[0]]] for part in parts}) == len(parts)  # and no component is split
+    assert all(len(group) > 1 for group in groups)
+
+
+def test_a_memo_shared_by_calls_gives_each_the_rankings_it_gives_alone() -> None:
+    problems = [_problem(300 + seed, 6, 6, share=0.3) for seed in range(8)]
+    problems += problems[:3]  # repeated problems are read from the memo
+    memo: ranked_matching.RankingMemo = {}
+    for rows, cols, cost in problems:
+        alone = ranked_matchings(rows, cols, cost, 6, 6, U, count=6, within=2.0)
+        shared = ranked_matchings(rows, cols, cost, 6, 6, U, count=6, within=2.0, memo=memo)
+        assert [(_pairs(m), m.extra) for m in shared] == [(_pairs(m), m.extra) for m in alone]
+    assert memo

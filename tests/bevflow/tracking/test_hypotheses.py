@@ -8,6 +8,7 @@ import pytest
 
 from bevflow.detections import Cylinders
 from bevflow.site import Thresholds
+from bevflow.tracking import hypotheses as hypotheses_module
 from bevflow.tracking.hypotheses import HypothesisTracker, _PublishedIds, online_tracker
 from bevflow.tracking.tracker import Tracker, TrackerConfig
 
@@ -97,7 +98,31 @@ def test_reset_forgets_tracks_but_keeps_counting_ids() -> None:
 
 def test_the_plain_tracker_unless_hypotheses_are_asked_for() -> None:
     assert type(online_tracker(TrackerConfig())) is Tracker
-    assert type(online_tracker(TrackerConfig.from_thresholds(Thresholds(track_hypotheses=20)))) is HypothesisTracker
+    assert type(online_tracker(TrackerConfig.from_thresholds(Thresholds(track_hypotheses=1)))) is Tracker
+    assert type(online_tracker(TrackerConfig.from_thresholds(Thresholds()))) is HypothesisTracker  # a site's default
+
+
+@pytest.mark.parametrize(
+    ("people", "hypotheses", "budget", "room"),
+    [
+        pytest.param(4, 20, 2000, 20, id="few people: as many as asked"),
+        pytest.param(4, 20, 40, 10, id="budget over people"),
+        pytest.param(4, 3, 40, 3, id="never more than asked"),
+        pytest.param(30, 20, 40, 1, id="a crowd past the budget: one"),
+    ],
+)
+def test_hypotheses_kept_shrink_as_tracks_outgrow_the_budget(monkeypatch, people: int, hypotheses: int,
+                                                            budget: int, room: int) -> None:  # fmt: skip
+    monkeypatch.setattr(hypotheses_module, "HYPOTHESIS_TRACKS", budget)
+    tracker = HypothesisTracker(TrackerConfig(activate_hits=1, hypotheses=hypotheses))
+    rng = np.random.default_rng(people)
+    xy = np.stack([np.arange(people) * 0.6, np.zeros(people)], 1)  # a queue, 0.6 m apart: choices to branch on
+    held = []
+    for k in range(8):
+        tracker.update(Cylinders(xy=xy + rng.normal(0, 0.15, xy.shape)), k / FPS)
+        held.append(len(tracker._hypotheses))
+    assert max(held) == room  # reached, never passed
+    assert len(tracker.best) == people and tracker.room() == room
 
 
 @pytest.mark.parametrize(
@@ -118,10 +143,12 @@ def test_branching_leaves_the_tracker_where_it_was_and_copies_share_the_ids() ->
     tracker.update(Cylinders(xy=[[0.0, 0.0], [0.5, 0.0]]), 0.0)
     before = tracker.tracks(include_tentative=True)
     branches = tracker.branch(Cylinders(xy=[[0.25, 0.0], [0.3, 0.0], [3.0, 3.0]]), 0.25, count=5, within=50.0)
+    children = [branches.child(choice) for choice in branches.choices]
     after = tracker.tracks(include_tentative=True)
     assert tracker.time_s == 0.0 and np.array_equal(before.xy, after.xy)
-    assert len(branches) > 1 and [c.cost for c, _ in branches] == sorted(c.cost for c, _ in branches)
-    born = [(table := child.report()).id[table.detection == 2].tolist() for _, child in branches]
+    costs = [choice.cost for choice in branches.choices]
+    assert len(costs) > 1 and costs == sorted(costs)
+    born = [(table := child.report()).id[table.detection == 2].tolist() for child in children]
     assert born[0] == [3] and born[1] == [4]  # one counter for every copy
     with pytest.raises(ValueError, match="gate_chi2"):
         Tracker(TrackerConfig(gate_chi2=None)).branch(Cylinders.empty(), 0.0, count=2, within=1.0)

@@ -74,7 +74,9 @@ def test_hypotheses_override_the_sites_and_are_named(recording: Path, capsys: py
     assert json.loads(out.read_text())["tracker"]["hypotheses"] == 5
     printed = capsys.readouterr().out
     assert "5 hypotheses over 2 s" in printed and "settled: as decided 2 s later, then one update late" in printed
-    assert main(args(recording, "--json", str(out))) == 0  # the site's own: one
+    assert main(args(recording, "--json", str(out))) == 0  # the site's own: the default, 20
+    assert json.loads(out.read_text())["tracker"]["hypotheses"] == 20 and "20 hypotheses" in capsys.readouterr().out
+    assert main(args(recording, "--hypotheses", "1", "--json", str(out))) == 0  # each update decided at once
     assert json.loads(out.read_text())["tracker"]["hypotheses"] == 1 and "hypotheses" not in capsys.readouterr().out
 
 
