@@ -43,9 +43,10 @@ MONITORED_RADIUS_M = 8.0
 FPS = 10.0
 STAGES = ("fusion", "tracker", "analytics")
 COVARIANCE_SOURCES = ("projector", "fusion")
+DEFAULT_HYPOTHESES: int = Thresholds.model_fields["track_hypotheses"].default  # what a site holds
 
 
-def grid_site(cameras: int, people: int, hypotheses: int = 1) -> Site:
+def grid_site(cameras: int, people: int, hypotheses: int = DEFAULT_HYPOTHESES) -> Site:
     """A site of ``cameras`` fisheyes in a near-square grid, four zones (the floor's quarters)
     and a capacity of ``people``; its tracker holds ``hypotheses`` ways of matching open."""
     cols = math.ceil(math.sqrt(cameras))
@@ -147,7 +148,7 @@ def with_projector_covariance(site: Site, per_camera: dict[str, Cylinders]) -> d
 
 
 def bench_tick(people: int, cameras: int, ticks: int = 100, warmup: int = 20, seed: int = 0,
-               profiler: cProfile.Profile | None = None, covariance: str = "projector", hypotheses: int = 1) -> dict:
+               profiler: cProfile.Profile | None = None, covariance: str = "projector", hypotheses: int = DEFAULT_HYPOTHESES) -> dict:
     """Time ``ticks`` steps after ``warmup`` untimed ones (tracks need a few hits to confirm);
     ``profiler`` (optional) is enabled around the timed steps only. ``covariance`` says where the
     position covariances come from: "projector" (with the cylinders) or "fusion" (in the tick)."""
@@ -203,7 +204,7 @@ def bench_tick(people: int, cameras: int, ticks: int = 100, warmup: int = 20, se
 
 
 def bench_grid(people: list[int], cameras: list[int], ticks: int, warmup: int, seed: int = 0,
-               covariance: str = "projector", hypotheses: int = 1) -> list[dict]:
+               covariance: str = "projector", hypotheses: int = DEFAULT_HYPOTHESES) -> list[dict]:
     """``bench_tick`` for every (people, cameras) pair."""
     return [bench_tick(p, c, ticks, warmup, seed, covariance=covariance, hypotheses=hypotheses)
             for c in cameras for p in people]
@@ -233,8 +234,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--covariance", choices=COVARIANCE_SOURCES, default="projector",
                         help="where position covariances come from: with the cylinders, as the projector sends "
                         "them (default), or computed by fusion in the tick")
-    parser.add_argument("--hypotheses", type=int, default=1,
-                        help="the site's track_hypotheses: ways of matching held open (default 1)")
+    parser.add_argument("--hypotheses", type=int, default=DEFAULT_HYPOTHESES,
+                        help=f"the site's track_hypotheses: ways of matching held open (default {DEFAULT_HYPOTHESES}, "
+                        "a site's)")
     parser.add_argument("--profile", action="store_true",
                         help="profile the timed steps of the first case (cProfile, thread CPU time) instead of timing")
     args = parser.parse_args(argv)

@@ -7,6 +7,7 @@ import pytest
 
 import bevflow.live.site_tracker as site_tracker_module
 from bevflow.live.site_tracker import SiteTracker
+from bevflow.site import Thresholds
 
 from bevflow_services.benchmarks.tracking import (
     CAMERA_SPACING_M,
@@ -67,6 +68,10 @@ def test_each_camera_reports_only_the_people_inside_its_circle() -> None:
             assert count >= 32  # 5 % missed, over 40 ticks
         else:
             assert count <= 2  # only a false positive could land there
+
+
+def test_the_bench_site_tracks_as_a_site_does_by_default() -> None:
+    assert grid_site(4, people=10).thresholds.track_hypotheses == Thresholds().track_hypotheses > 1
 
 
 @pytest.mark.parametrize("hypotheses", [1, 5])
