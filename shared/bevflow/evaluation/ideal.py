@@ -9,8 +9,10 @@ replay's own tracker settings (the site's), and the scores are ``bevflow.evaluat
 headline.
 
 On CMC2 (``docs/RESULTS.md``), where the replay's tracks lie 0.13 m from the truth on average, the
-tracker given the truth exactly or with 0.05 / 0.10 / 0.15 m of noise scores IDF1 0.91 / 0.86 /
-0.63 / 0.58 (four seeds' mean; 0.49–0.73 at 0.10 m) at MOTA 0.98 / 0.98 / 0.95 / 0.94. A quarter of
+tracker deciding each update at once (``--hypotheses 1``) given the truth exactly or with 0.05 /
+0.10 / 0.15 m of noise scores IDF1 0.91 / 0.86 / 0.63 / 0.58 (four seeds' mean; 0.49–0.73 at
+0.10 m) at MOTA 0.98 / 0.98 / 0.95 / 0.94; with 20 hypotheses, the default, 0.99 / 0.89 / 0.77
+(0.10 m: six seeds, 0.62–0.89) for the first three. A quarter of
 the time a person's nearest neighbour is under 0.58 m away, and a constant-velocity guess one
 frame (0.25 s) ahead misses the truth by 0.11 m (median): at that noise, tracks swap in a crowd
 where every person is found.
