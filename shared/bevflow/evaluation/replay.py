@@ -144,7 +144,7 @@ class _Run:
     """The site tracker and what is kept of each step for scoring."""
 
     def __init__(self, site: Site, config: TrackerConfig, area: Area, threshold_m: float) -> None:
-        self.site_tracker = SiteTracker(site, tracker_config=config)
+        self.site_tracker = SiteTracker(site, tracker_config=config, keep_final=True)
         self.config, self.area, self.threshold_m = config, area, threshold_m
         self.late = SettledTracks()
         self.tracks: list[tuple[int, TrackTable]] = []

@@ -191,7 +191,7 @@ def track_and_match_both(
         raise ValueError(
             f"gt, fused, times_s and sightings differ in length: {len(gt)}, {len(fused)}, {len(times_s)}, {len(sightings)}"
         )
-    tracker = online_tracker(config)
+    tracker = online_tracker(config, keep_final=True)
     online: list[TrackTable] = []
     settled: list[TrackTable] = []
     late = SettledTracks()

@@ -45,13 +45,16 @@ class SiteTracker:
     """Fusion, the one tracker and the analytics of a site, stepped tick by tick.
 
     ``first_id`` continues the id sequence of a previous run, so a restarted tracker never reuses
-    an id that clients or the history already know."""
+    an id that clients or the history already know. ``keep_final``: the tracker keeps the updates
+    its hypotheses made final (``bevflow.tracking.hypotheses.final_updates``), for an evaluation."""
 
-    def __init__(self, site: Site, tracker_config: TrackerConfig | None = None, first_id: int = 1) -> None:
+    def __init__(self, site: Site, tracker_config: TrackerConfig | None = None, first_id: int = 1,
+                 keep_final: bool = False) -> None:  # fmt: skip
         self.site = site
         self.camera_ids = site.camera_ids
         self.cameras = [site.camera(c) for c in self.camera_ids]
-        self.tracker = online_tracker(tracker_config or TrackerConfig.from_thresholds(site.thresholds), first_id)
+        config = tracker_config or TrackerConfig.from_thresholds(site.thresholds)
+        self.tracker = online_tracker(config, first_id, keep_final)
         self.analytics = SiteAnalytics(site)
         self._alone = [[c] for c in self.camera_ids]  # shared lists, read only: serialised as they are
 

@@ -115,10 +115,13 @@ class _PublishedIds:
 
 
 class HypothesisTracker:
-    """The online tracker's interface over several hypotheses; see the module docstring."""
+    """The online tracker's interface over several hypotheses; see the module docstring.
+    ``keep_final``: keep each update as it is made final, for ``final`` and ``finish`` (an
+    evaluation's settled output); the live tracker asks for none and keeps none."""
 
-    def __init__(self, config: TrackerConfig | None = None, first_id: int = 1) -> None:
+    def __init__(self, config: TrackerConfig | None = None, first_id: int = 1, keep_final: bool = False) -> None:
         self.config = config or TrackerConfig()
+        self.keep_final = keep_final
         self._hypotheses = [_Hypothesis(0.0, Tracker(self.config), _Decision(float("-inf"), None, None))]
         self._final: list[tuple[float, TrackTable]] = []
         self._published = _PublishedIds(int(first_id))
@@ -177,7 +180,9 @@ class HypothesisTracker:
     def final(self) -> list[tuple[float, TrackTable]]:
         """The updates made final since the last call, oldest first: (time, every track after
         it, tentative ones too), as the hypothesis that won saw them. Each update comes out once,
-        ``hypothesis_window_s`` after it was made, or at ``finish``."""
+        ``hypothesis_window_s`` after it was made, or at ``finish``. Only with ``keep_final``."""
+        if not self.keep_final:
+            raise ValueError("HypothesisTracker.final needs keep_final=True: no final updates were kept")
         out, self._final = self._final, []
         return out
 
@@ -198,10 +203,11 @@ class HypothesisTracker:
         while node.before is not None:  # back to the last update made final before
             newly.append(node)
             node = node.before
-        for decision in reversed(newly):
-            if decision.tracker is not None:
-                tracks = decision.tracker.tracks(include_tentative=True)
-                self._final.append((decision.time_s, self._published.publish(tracks)))
+        if self.keep_final:
+            for decision in reversed(newly):
+                if decision.tracker is not None:
+                    tracks = decision.tracker.tracks(include_tentative=True)
+                    self._final.append((decision.time_s, self._published.publish(tracks)))
         settled.before = None
         least = self._hypotheses[0].cost
         for hypothesis in self._hypotheses:
@@ -218,9 +224,12 @@ class HypothesisTracker:
         return held
 
 
-def online_tracker(config: TrackerConfig, first_id: int = 1) -> Tracker | HypothesisTracker:
-    """The tracker ``config`` asks for: several hypotheses, or the plain one."""
-    return HypothesisTracker(config, first_id) if config.hypotheses > 1 else Tracker(config, first_id)
+def online_tracker(config: TrackerConfig, first_id: int = 1, keep_final: bool = False) -> Tracker | HypothesisTracker:
+    """The tracker ``config`` asks for: several hypotheses (keeping their final updates where
+    ``keep_final``), or the plain one."""
+    if config.hypotheses > 1:
+        return HypothesisTracker(config, first_id, keep_final)
+    return Tracker(config, first_id)
 
 
 def final_updates(tracker: Tracker | HypothesisTracker, time_s: float) -> list[tuple[float, TrackTable]]:

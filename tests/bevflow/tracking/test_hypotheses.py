@@ -56,7 +56,7 @@ def _crowd(seed: int, frames: int = 24) -> list[Cylinders]:
 
 def test_every_update_is_made_final_once_in_order_a_window_late() -> None:
     config = TrackerConfig(hypotheses=10, hypothesis_window_s=1.0)
-    tracker = HypothesisTracker(config)
+    tracker = HypothesisTracker(config, keep_final=True)
     final = []
     for k, cylinders in enumerate(_crowd(1)):
         tracker.update(cylinders, k / FPS)
@@ -69,9 +69,18 @@ def test_every_update_is_made_final_once_in_order_a_window_late() -> None:
     assert tracker.final() == [] and tracker.finish() == []
 
 
+def test_a_live_tracker_keeps_no_final_updates() -> None:
+    tracker = HypothesisTracker(TrackerConfig(hypotheses=10, hypothesis_window_s=1.0))  # as a site runs it
+    for k, cylinders in enumerate(_crowd(1)):
+        tracker.update(cylinders, k / FPS)
+    assert tracker._final == []  # nothing piles up for a reader that never comes
+    with pytest.raises(ValueError, match="keep_final"):
+        tracker.final()
+
+
 @pytest.mark.parametrize("seed", range(3))
 def test_an_id_is_never_given_to_two_tracks(seed: int) -> None:
-    tracker = HypothesisTracker(TrackerConfig(hypotheses=10, activate_hits=2), first_id=50)
+    tracker = HypothesisTracker(TrackerConfig(hypotheses=10, activate_hits=2), first_id=50, keep_final=True)
     key_of: dict[int, int] = {}
     reported: set[int] = set()
     for k, cylinders in enumerate(_crowd(seed)):
