@@ -21,6 +21,7 @@ from pydantic import ValidationError
 
 from bevflow.datasets.mot import MIN_CONFIDENCE, RecordingError, read_detections, read_truth
 from bevflow.datasets.wildtrack import FloorArea
+from bevflow.evaluation.camera_errors import CameraError
 from bevflow.evaluation.ideal import ideal_tracking
 from bevflow.evaluation.perturbed import BoxPerturbation, PerturbedReplays, perturbed_replays
 from bevflow.evaluation.replay import SCORED, Everywhere, ReplayEvaluation, replay_tracking
@@ -172,7 +173,19 @@ def format_replay(r: ReplayEvaluation, site: Site) -> str:
     late = "one update late" if c.hypotheses == 1 else f"as decided {c.hypothesis_window_s:g} s later, then one update late"
     rows.append(f"online: the tracks as the live tracker publishes them; settled: {late}; "
                 "fused: each frame's fused detections before tracking")
-    return "\n".join(rows)
+    return "\n".join(rows + format_camera_errors(r.cameras))
+
+
+def format_camera_errors(cameras: tuple[CameraError, ...]) -> list[str]:
+    """Each camera's views against the truth, a row each (``bevflow.evaluation.camera_errors``)."""
+    rows = ["each camera's views against the truth (mean ± spread; bearing + anticlockwise, range + beyond, "
+            "lag: the views show people that much later):",
+            f"{'camera':<12} {'views':>6} {'bearing mrad':>15} {'range m':>15} {'lag s':>7}"]
+    for c in cameras:
+        lag = f"{'-':>7}" if c.lag_s is None else f"{c.lag_s:>+7.3f}"
+        rows.append(f"{c.camera_id:<12} {c.views:>6} {c.across_mrad:>+7.1f} ± {c.across_spread_mrad:<5.1f} "
+                    f"{c.along_m:>+7.3f} ± {c.along_spread_m:<5.3f} {lag}")
+    return rows
 
 
 _SHORT = {"precision": "prec", "APE": "APE m"}  # the column heads of format_replay

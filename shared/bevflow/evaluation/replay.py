@@ -17,7 +17,8 @@ Scores (matched within ``threshold_m`` on the floor):
 - ``settled``: the same tracker's output one update late (``bevflow.tracking.settled``), after
   what several hypotheses (``bevflow.tracking.hypotheses``) decided a window later where the site
   holds them;
-- ``detection``: each frame's fused cylinders on their own, before tracking.
+- ``detection``: each frame's fused cylinders on their own, before tracking;
+- ``cameras``: each camera's own views against the truth (``bevflow.evaluation.camera_errors``).
 
 Area: the tracker sees everything, but estimates outside ``area`` that match nobody are neither
 right nor wrong (``scored_estimates``, as for WILDTRACK): nobody outside it is annotated.
@@ -25,7 +26,7 @@ right nor wrong (``scored_estimates``, as for WILDTRACK): nobody outside it is a
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -33,6 +34,7 @@ from numpy.typing import NDArray
 
 from bevflow.datasets.mot import DetectionRecording, WorldTruth, check_no_long_gap
 from bevflow.detections import Cylinders
+from bevflow.evaluation.camera_errors import CameraError, CameraErrorSamples
 from bevflow.evaluation.detection import Area, scored_estimates
 from bevflow.live.projection import CameraProjection
 from bevflow.live.site_tracker import SiteTracker
@@ -81,6 +83,7 @@ class ReplayEvaluation:
     settled: TrackingScores
     settled_hota: HotaScores
     detection: DetectionScores  # each frame's fused cylinders, before tracking
+    cameras: tuple[CameraError, ...] = ()  # each camera's views against the truth, in site order
     tracks: tuple[tuple[int, TrackTable], ...] = field(default=(), repr=False, compare=False)
     """(frame number, online tracks) for every replayed frame, inside the area or not."""
 
@@ -98,6 +101,7 @@ class ReplayEvaluation:
             "tracked": {**self.scores.as_dict(), **self.hota.as_dict()},
             "settled": {**self.settled.as_dict(), **self.settled_hota.as_dict()},
             "detection": self.detection.as_dict(),
+            "cameras": [c.as_dict() for c in self.cameras],
             "fps": self.fps,
             "min_confidence": self.min_confidence,
             "threshold_m": self.threshold_m,
@@ -133,11 +137,14 @@ def replay_tracking(
     first = min([first_scored, *recording.frame_numbers[:1]])
     run = _Run(site, config, area, threshold_m)
     projection = CameraProjection(site)
+    cameras = CameraErrorSamples(site.camera_ids, [site.camera(c) for c in site.camera_ids], truth, fps, threshold_m)
     for frame in range(first, last + 1):
         per_camera = {c.camera_id: projection.project(c.camera_id, boxes) for c in recording.cameras
                       if len(boxes := c.boxes(frame, min_confidence))}
         run.step(frame, frame / fps, per_camera, truth.at(frame) if frame >= first_scored else None)
-    return run.finish(tuple(range(first_scored, last + 1)), fps, min_confidence)
+        if frame >= first_scored:
+            cameras.add(frame, per_camera)
+    return replace(run.finish(tuple(range(first_scored, last + 1)), fps, min_confidence), cameras=cameras.errors())
 
 
 class _Run:
