@@ -48,6 +48,7 @@ FloatArray = NDArray[np.float64]
 
 MOVING_MPS = 0.3  # a person slower than this says little about a lag
 MIN_MOVING = 10  # moving matches a lag needs
+MIN_RANGE_M = 0.1  # nearer the point below the camera, a bearing means nothing
 
 
 @dataclass(frozen=True)
@@ -89,10 +90,11 @@ class CameraErrorSamples:
             views = views[(views.score > 0) & np.isfinite(views.xy).all(axis=1)]
             gap = np.linalg.norm(views.xy[:, None] - truth_xy[None], axis=2)
             view, person = linear_sum_assignment(np.where(gap < self.threshold_m, gap, 1e6))
-            close = gap[view, person] < self.threshold_m
-            view, person = view[close], person[close]
+            # Right below a camera (a ceiling view's centre) a person has no line of sight to split along.
             sight = truth_xy[person] - self.cameras[index].center[:2]
             distance = np.linalg.norm(sight, axis=1)
+            close = (gap[view, person] < self.threshold_m) & (distance >= MIN_RANGE_M)
+            view, person, sight, distance = view[close], person[close], sight[close], distance[close]
             along = sight / distance[:, None]
             across = np.column_stack([-along[:, 1], along[:, 0]])  # anticlockwise of the line of sight
             error = views.xy[view] - truth_xy[person]

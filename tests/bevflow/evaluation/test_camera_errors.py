@@ -81,3 +81,15 @@ def test_a_replay_names_the_camera_whose_boxes_come_a_frame_late(tmp_path: Path)
     assert second.views == 21 and on_time[1].lag_s is not None and second.lag_s is not None  # frame 0: no boxes
     assert second.lag_s - on_time[1].lag_s == pytest.approx(-0.5, abs=0.05)  # a frame is 0.5 s here
     assert result.as_dict()["cameras"][1]["lag_s"] == second.lag_s
+
+
+def test_a_person_right_below_a_camera_and_a_camera_without_strong_views_are_passed_over() -> None:
+    camera = fake_cameras()[0]
+    below = camera.center[:2]
+    truth = WorldTruth({0: (np.array([1, 2]), np.array([below, [4.0, 0.0]]))})
+    samples = CameraErrorSamples(["cam", "weak"], [camera, camera], truth, FPS)
+    samples.add(0, {"cam": Cylinders(xy=[below, [4.0, 0.1]], camera=[0, 0]),
+                    "weak": Cylinders(xy=[[4.0, 0.0]], camera=[0], score=[0.0])})  # fmt: skip
+    cam, weak = samples.errors()
+    assert cam.views == 1 and np.isfinite([cam.across_mrad, cam.along_m]).all()
+    assert weak.views == 0
