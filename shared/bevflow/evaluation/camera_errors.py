@@ -108,13 +108,8 @@ class CameraErrorSamples:
 
     def _velocity(self, frame: int, ids: NDArray[np.int64]) -> FloatArray:
         """Each person's velocity from the frames either side (NaN without both), m/s."""
-        before, after = self.truth.at(frame - 1), self.truth.at(frame + 1)
-        out = np.full((len(ids), 2), np.nan)
-        for i, person in enumerate(ids.tolist()):
-            a, b = np.flatnonzero(before[0] == person), np.flatnonzero(after[0] == person)
-            if len(a) and len(b):
-                out[i] = (after[1][b[0]] - before[1][a[0]]) * self.fps / 2.0
-        return out
+        before, after = _where(ids, *self.truth.at(frame - 1)), _where(ids, *self.truth.at(frame + 1))
+        return (after - before) * self.fps / 2.0
 
     def _summary(self, camera_id: str, rows: list[FloatArray]) -> CameraError:
         m = np.concatenate(rows) if rows else np.zeros((0, 7))
@@ -124,6 +119,18 @@ class CameraErrorSamples:
         bearing = across / distance * 1e3
         return CameraError(camera_id, len(m), float(bearing.mean()), float(bearing.std()), float(along.mean()),
                            float(along.std()), _lag(m[:, 3:5], m[:, 5:7]))  # fmt: skip
+
+
+def _where(ids: NDArray[np.int64], known: NDArray[np.int64], xy: FloatArray) -> FloatArray:
+    """The position of each of ``ids`` among the people ``known`` at ``xy``; NaN for the absent."""
+    out = np.full((len(ids), 2), np.nan)
+    if not len(known):
+        return out
+    order = np.argsort(known)
+    slot = np.minimum(np.searchsorted(known[order], ids), len(known) - 1)
+    present = known[order][slot] == ids
+    out[present] = xy[order][slot[present]]
+    return out
 
 
 def _lag(error: FloatArray, velocity: FloatArray) -> float | None:
