@@ -32,6 +32,9 @@ steps, each resumable (run the same command again to continue):
   bevflow train-detector set-threshold --model model.onnx --threshold 0.5
                                                                          the score it reports people from, kept in the file
                                                                          (evaluate --detector prints the best-F1 one)
+  bevflow train-detector calibrate-scores --model tiles.onnx --annotations data/cal/annotations.json
+                                                                         a rim-tile model's scores put on the general
+                                                                         model's scale, kept in the file
 
 Rendered crops are drawn at the detector's input scale (a person at the image centre ~20 px).
 COCO images are scaled from their 'camera_height_m' and 'focal_px' keys when present, else by --scale.
@@ -62,6 +65,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     evalset.add_argument("--out", type=Path, required=True, metavar="DIR", help="folder for the PNG frames and annotations.json")
     evalset.add_argument("--count", type=int, default=100, metavar="N", help="number of frames (default 100)")
     evalset.add_argument("--seed", type=int, default=1000, metavar="N", help="random seed, unlike the training seed (default 1000)")
+    evalset.add_argument("--frame-px", type=int, metavar="PX",
+                         help="render each frame PX pixels across, as a camera delivers it (e.g. 2048), instead of "
+                         "1-1.4 x the detector's scale (a few hundred pixels); the same scenes")  # fmt: skip
     _heights_option(evalset, "e.g. 3 5 for the cameras the rim tiles serve")
     _scene_options(evalset)
     evalset.set_defaults(func=_render_eval)
@@ -101,6 +107,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                            help="0 to 1: the detector reports people scoring at least this unless told otherwise "
                            "(e.g. the best-F1 score evaluate --detector prints on frames of the model's cameras)")  # fmt: skip
     threshold.set_defaults(func=_set_threshold)
+    calibrate = sub.add_parser("calibrate-scores", help="put a rim-tile model's scores on the general model's scale, "
+                               "kept in its file (needs onnx)")  # fmt: skip
+    calibrate.add_argument("--model", type=Path, required=True, metavar="FILE", help="the rim tiles' .onnx model, changed in place")
+    calibrate.add_argument("--annotations", type=Path, required=True, metavar="FILE",
+                           help="COCO JSON of held-out frames of mixed heights with their cameras' height and focal "
+                           "length (render-eval with a seed of its own)")  # fmt: skip
+    calibrate.add_argument("--images", type=Path, metavar="DIR", help="the frames' folder (default: beside the annotations)")
+    calibrate.add_argument("--threads", type=int, default=2, metavar="N", help="detector threads (default 2)")
+    calibrate.set_defaults(func=_calibrate_scores)
 
 
 def _heights_option(parser: argparse.ArgumentParser, example: str) -> None:
@@ -159,7 +174,10 @@ def _render(args: argparse.Namespace) -> int:
 def _render_eval(args: argparse.Namespace) -> int:
     from bevflow.training.dataset import render_evaluation_set
 
-    path = render_evaluation_set(args.out, _count(args.count, "--count"), seed=args.seed, mix=_mix(args), heights=_heights(args))
+    if args.frame_px is not None and not 64 <= args.frame_px <= 8192:
+        raise UserError(f"--frame-px must be 64 to 8192 pixels, got {args.frame_px}")
+    path = render_evaluation_set(args.out, _count(args.count, "--count"), seed=args.seed, mix=_mix(args), heights=_heights(args),
+                                 frame_px=args.frame_px)  # fmt: skip
     print(f"wrote {args.count} frames and {path}")
     return 0
 
@@ -232,6 +250,28 @@ def _set_threshold(args: argparse.Namespace) -> int:
     except Exception as exc:  # onnx raises its own types for a file that is not a model
         raise UserError(f"cannot write the threshold into {args.model}: {exc}") from None
     print(f"{args.model}: reports people scoring at least {args.threshold:g}")
+    return 0
+
+
+def _calibrate_scores(args: argparse.Namespace) -> int:
+    from bevflow.detect.runtime import DetectorError
+    from bevflow.training.metadata import set_score_map
+    from bevflow.training.score_calibration import calibrate_tile_scores
+
+    for path, what in ((args.model, "model file"), (args.annotations, "annotation file")):
+        if not path.is_file():
+            raise UserError(f"no such {what}: {path}")
+    if args.threads < 1:
+        raise UserError(f"--threads must be >= 1, got {args.threads}")
+    try:
+        result = calibrate_tile_scores(args.model, args.annotations, args.images, args.threads)
+    except (ValueError, FileNotFoundError, DetectorError) as exc:
+        raise UserError(f"cannot calibrate {args.model}: {exc}") from None
+    try:
+        set_score_map(args.model, result.score_map)
+    except Exception as exc:  # onnx raises its own types for a file that is not a model
+        raise UserError(f"cannot write the score map into {args.model}: {exc}") from None
+    print(json.dumps({"model": str(args.model), **result.as_dict()}))
     return 0
 
 

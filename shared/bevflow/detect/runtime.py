@@ -30,6 +30,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from bevflow.detect.confidence import SCORE_MAP_METADATA_KEY, ScoreMap
 from bevflow.detect.cpu import int8_dot_product
 from bevflow.detect.decoders import FORMATS, decode_centernet, decode_fastestdet, decode_yolov5, decode_yolov8, decode_yolox, guess_format
 from bevflow.detect.providers import DEFAULT_PROVIDERS, check_providers, plan_providers
@@ -96,7 +97,9 @@ class Detector:
     ``rgb`` and ``input_scale`` say what the model expects (defaults: BGR 0–255 for the
     project's model and YOLOX, RGB 0–1 for YOLOv5/v8, BGR 0–1 for FastestDet). ``zoom``: the frame is resized to this
     multiple of the height-adaptive scale, read from the model file (``ZOOM_METADATA_KEY``,
-    default 1). ``score_threshold``: the lowest score reported; None takes the model file's own
+    default 1). Scores are reported on the general model's scale: the file's ``ScoreMap``
+    (``bevflow.detect.confidence``) maps the network's own onto it, unless ``score_map`` is given.
+    ``score_threshold``: the lowest (mapped) score reported; None takes the model file's own
     (``SCORE_THRESHOLD_METADATA_KEY``), else ``SCORE_THRESHOLD``."""
 
     def __init__(
@@ -111,6 +114,7 @@ class Detector:
         input_scale: float | None = None,
         session: InferenceSession | None = None,
         providers: Sequence[str] = DEFAULT_PROVIDERS,
+        score_map: ScoreMap | None = None,
     ) -> None:
         self.model_path = Path(model_path) if model_path is not None else DEFAULT_MODEL
         # ``session``: anything with ONNX Runtime's get_inputs / get_outputs / run (tests, or a
@@ -135,6 +139,7 @@ class Detector:
         self.nms_iou, self.person_class = nms_iou, person_class
         self.zoom = _model_zoom(self.session)
         self.score_threshold = _model_score_threshold(self.session) if score_threshold is None else score_threshold
+        self.score_map = _model_score_map(self.session) if score_map is None else score_map
 
     # --- public API ----------------------------------------------------------------------------
     def detect(self, image_bgr: NDArray[np.uint8], camera_height_m: float, focal_px: float) -> Boxes:
@@ -207,7 +212,7 @@ class Detector:
     # --- decoding -------------------------------------------------------------------------------
     def _boxes(self, outputs: list[np.ndarray], k: int, prepared: PreparedInput, input_hw: tuple[int, ...]) -> Boxes:
         one = [o[k : k + 1] for o in outputs]
-        thr = self.score_threshold
+        thr = self.score_map.raw(self.score_threshold)  # decoders keep raw scores from this up
         if self.format == "centernet":
             xyxy, scores = decode_centernet(one[0], one[1], one[2], thr)
         elif self.format == "yolov5":
@@ -219,7 +224,7 @@ class Detector:
         else:
             xyxy, scores = decode_yolox(one[0][0], (int(input_hw[0]), int(input_hw[1])), thr, self.person_class)
         keep = nms(xyxy, scores, self.nms_iou)
-        xyxy, scores = xyxy[keep], scores[keep]
+        xyxy, scores = xyxy[keep], self.score_map(scores[keep])
         # Model pixels → frame pixels (pixel-centre coordinates: u = (u' + 0.5) / s − 0.5).
         px, py = prepared.pad
         s = prepared.scale
@@ -282,6 +287,17 @@ def _model_zoom(session: InferenceSession) -> float:
 
 def _model_score_threshold(session: InferenceSession) -> float:
     return _metadata_number(session, SCORE_THRESHOLD_METADATA_KEY, SCORE_THRESHOLD, 0.0, 1.0)
+
+
+def _model_score_map(session: InferenceSession) -> ScoreMap:
+    meta = getattr(session, "get_modelmeta", None)  # test doubles may have none
+    text = meta().custom_metadata_map.get(SCORE_MAP_METADATA_KEY) if meta is not None else None
+    if text is None:
+        return ScoreMap()
+    try:
+        return ScoreMap.from_text(text)
+    except ValueError as exc:
+        raise DetectorError(f"model metadata {SCORE_MAP_METADATA_KEY}: {exc}") from None
 
 
 def _metadata_number(session: InferenceSession, key: str, default: float, low: float, high: float) -> float:

@@ -153,11 +153,15 @@ class RimTileDetector:
         if middle is not None:
             found, found_conf = middle.result()
             mid = radial_boxes(found, centre)
-            near = np.hypot(mid[:, 0] - centre[0], mid[:, 1] - centre[1]) < self.centre_share * radius
-            inner = np.hypot(rotated[:, 0] - centre[0], rotated[:, 1] - centre[1]) >= self.centre_share * radius
+            near, inner = ~self.from_tiles(mid, focal_px, centre), self.from_tiles(rotated, focal_px, centre)
             rotated, xyxy = np.concatenate([rotated[inner], mid[near]]), np.concatenate([xyxy[inner], found[near]])
             conf = np.concatenate([conf[inner], found_conf[near]])
         return Boxes(xyxy, conf), rotated
+
+    def from_tiles(self, rotated: FloatArray, focal_px: float, centre: tuple[float, float]) -> NDArray[np.bool_]:
+        """Which of the rotated boxes (N, 5) lie where the tiles' boxes are kept, the rest being
+        the centre model's: their centres at least ``centre_share`` of the circle's radius out."""
+        return np.hypot(rotated[:, 0] - centre[0], rotated[:, 1] - centre[1]) >= self.centre_share * focal_px * self.half_view
 
     def _centre_boxes(self, image_bgr: NDArray[np.uint8], small: NDArray[np.uint8], k_small: float, camera_height_m: float,
                       focal_px: float, centre: tuple[float, float]) -> tuple[FloatArray, FloatArray]:  # fmt: skip

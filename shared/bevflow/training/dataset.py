@@ -73,13 +73,15 @@ class SceneMix:
 
 def render_sample(
     rng: np.random.Generator, size: int | None = 288, max_people: int = 30, zoom: float = 1.0, min_pixels: int = 6,
-    heights: tuple[float, float] = MOUNTING_HEIGHTS_M, mix: SceneMix = SceneMix(),
+    heights: tuple[float, float] = MOUNTING_HEIGHTS_M, mix: SceneMix = SceneMix(), frame_px: int | None = None,
 ) -> RenderedSample:
     """One random window of ``size`` px (None: the whole frame) of a random ceiling fisheye frame
     at the detector's input scale times ``zoom`` (zoom > 1: a frame as a camera would deliver it,
     larger than the detector's input), from a camera hanging at a height drawn from ``heights``
     (metres, low and high). People with fewer than ``min_pixels`` visible pixels get no box (a
-    person is some 300 px at the detector's scale). ``mix`` draws harder cases more often."""
+    person is some 300 px at the detector's scale). ``mix`` draws harder cases more often.
+    ``frame_px``: the frame is that many pixels across whatever the height, as a camera's sensor
+    gives it, the same scene as without it; ``min_pixels`` grows with the enlargement squared."""
     height = rng.uniform(*heights)
     cam = _random_camera(rng, height, zoom, mix.squared)
     w = cam.image_size[0]
@@ -99,6 +101,11 @@ def render_sample(
     room = _random_room(rng, height, floor_pts)
     people_xy = _spread(rng, floor_pts, int(rng.integers(0, max_people + 1)) if rng.random() > 0.08 else 0, room, mix.grouped)
     n = len(people_xy)
+    if frame_px is not None:  # the scene is drawn; only the picture of it is larger
+        k = frame_px / w
+        cam, radius, min_pixels = _resized(cam, frame_px), radius * k, int(min_pixels * k * k)
+        wx0, wy0, wx1, wy1 = (int(round(v * k)) for v in window)
+        window = (wx0, wy0, wx1, wy1)
     bodies = pose_bodies(
         BodyShape.sample(rng, n), people_xy, rng.uniform(0, 2 * np.pi, n), rng.uniform(0, 2 * np.pi, n),
         rng.uniform(0, 1.6, n), rng.choice(3, n, p=[0.6, 0.3, 0.1]),
@@ -129,6 +136,14 @@ def _random_camera(rng: np.random.Generator, height: float, zoom: float = 1.0, s
     if squared > 0 and rng.random() < squared:
         R = rotation_from_ypr(90.0 * int(rng.integers(4)), 0.0, 0.0)
     return FisheyeCamera(K=K, dist=dist, R=R, t=-R @ np.array([0.0, 0.0, height]), image_size=(size, size))
+
+
+def _resized(cam: FisheyeCamera, frame_px: int) -> FisheyeCamera:
+    """``cam`` with a square frame of ``frame_px`` (its focal length and centre scaled with it)."""
+    k = frame_px / cam.image_size[0]
+    c = (frame_px - 1) / 2.0
+    K = np.array([[cam.K[0, 0] * k, 0.0, c], [0.0, cam.K[1, 1] * k, c], [0.0, 0.0, 1.0]])
+    return FisheyeCamera(K=K, dist=cam.dist, R=cam.R, t=cam.t, image_size=(frame_px, frame_px))
 
 
 def _window_floor_points(rng: np.random.Generator, cam: FisheyeCamera, window: tuple[int, int, int, int], radius: float) -> FloatArray:
@@ -265,12 +280,14 @@ def render_dataset(folder: Path, count: int, seed: int = 0, shard_size: int = 50
 
 
 def render_evaluation_set(folder: Path, count: int, seed: int = 1000, zoom: tuple[float, float] = (1.0, 1.4),
-                          mix: SceneMix = SceneMix(), heights: tuple[float, float] = MOUNTING_HEIGHTS_M) -> Path:
+                          mix: SceneMix = SceneMix(), heights: tuple[float, float] = MOUNTING_HEIGHTS_M,
+                          frame_px: int | None = None) -> Path:  # fmt: skip
     """Render ``count`` whole frames (cameras ``heights`` high, 3–10 m by default) as PNG files
     plus ``annotations.json`` (COCO, with ``camera_height_m`` and ``focal_px`` per image) into
     ``folder``; frames are ``zoom`` times the detector's input scale, so evaluating them
-    exercises the resize too. Use a seed the training data did not use; ``mix`` as in
-    ``render_sample``. Returns the annotation file."""
+    exercises the resize too, or ``frame_px`` across (a camera's frame: the same scenes, sharper).
+    Use a seed the training data did not use; ``mix`` as in ``render_sample``. Returns the
+    annotation file."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     images, boxes = [], []
@@ -278,7 +295,7 @@ def render_evaluation_set(folder: Path, count: int, seed: int = 1000, zoom: tupl
         rng = np.random.default_rng([seed, k])
         z = float(rng.uniform(*zoom))
         # Whole frames: slivers of people cut by the image circle's rim are not worth a box.
-        sample = render_sample(rng, size=None, zoom=z, min_pixels=int(30 * z * z), heights=heights, mix=mix)
+        sample = render_sample(rng, size=None, zoom=z, min_pixels=int(30 * z * z), heights=heights, mix=mix, frame_px=frame_px)
         name = f"frame-{k:05d}.png"
         cv2.imwrite(str(folder / name), sample.image)
         h, w = sample.image.shape[:2]

@@ -4,6 +4,8 @@ written into the file, the other keys it holds left as they are.
 ``set_score_threshold`` keeps a model's reporting threshold (``SCORE_THRESHOLD_METADATA_KEY``),
 chosen as the best-F1 score on rendered frames of its cameras (``bevflow evaluate --detector``
 prints it), so that a site reports people with the confidence that suits that network.
+``set_score_map`` keeps the map of its scores onto the general model's (``bevflow.detect.confidence``);
+the threshold is then on the mapped scale.
 """
 
 from __future__ import annotations
@@ -11,6 +13,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from bevflow.detect.confidence import SCORE_MAP_METADATA_KEY, ScoreMap
 from bevflow.detect.runtime import SCORE_THRESHOLD_METADATA_KEY
 
 
@@ -30,3 +33,8 @@ def set_score_threshold(path: Path, threshold: float) -> None:
     if not (math.isfinite(threshold) and 0.0 < threshold < 1.0):
         raise ValueError(f"a score threshold lies between 0 and 1, got {threshold}")
     set_metadata(path, SCORE_THRESHOLD_METADATA_KEY, f"{threshold:g}")
+
+
+def set_score_map(path: Path, score_map: ScoreMap) -> None:
+    """Keep ``score_map`` in the model file: the detector reports its scores mapped by it."""
+    set_metadata(path, SCORE_MAP_METADATA_KEY, score_map.to_text())

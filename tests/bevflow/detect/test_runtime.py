@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from bevflow.camera import FisheyeCamera
+from bevflow.detect.confidence import ScoreMap
 from bevflow.detect.cpu import int8_dot_product
 from bevflow.detect.runtime import (
     DEFAULT_MODEL,
@@ -111,12 +112,33 @@ def test_a_bad_threshold_in_the_model_file_is_a_clear_error(value: str, message:
         Detector(session=FakeCenterNet(metadata={"bevflow.score_threshold": value}))
 
 
+@pytest.mark.parametrize(
+    ("metadata", "given_map", "threshold", "reported"),
+    [(None, None, 0.4, 0.9),  # no map: the network's own score
+     ({"bevflow.score_map": "0.5 -0.5"}, None, 0.4, 0.645),  # the file's map: σ(0.5 · logit(0.9) − 0.5)
+     ({"bevflow.score_map": "0.5 -0.5"}, ScoreMap(), 0.4, 0.9),  # the caller's map wins (fitting one reads raw scores)
+     ({"bevflow.score_map": "0.5 -0.5"}, None, 0.7, None)],  # the threshold is on the mapped scale: 0.645 < 0.7
+)
+def test_scores_are_reported_on_the_scale_the_model_file_maps_them_to(
+    metadata: dict[str, str] | None, given_map: ScoreMap | None, threshold: float, reported: float | None
+) -> None:
+    detector = Detector(session=FakeCenterNet(metadata=metadata), score_threshold=threshold, score_map=given_map)
+    boxes = detector.detect(_frame(64, 64, (30, 30)), 3.3, 300.0)
+    assert boxes.confidence.tolist() == ([] if reported is None else [pytest.approx(reported, abs=1e-3)])
+
+
+def test_a_bad_score_map_in_the_model_file_is_a_clear_error() -> None:
+    with pytest.raises(DetectorError, match="model metadata bevflow.score_map: a score map is two numbers"):
+        Detector(session=FakeCenterNet(metadata={"bevflow.score_map": "steep"}))
+
+
 def test_the_shipped_tile_model_keeps_its_own_threshold_and_the_general_model_none() -> None:
     from bevflow.detect.tiles import TILE_MODEL
 
     tiles, general = Detector(TILE_MODEL, threads=1), Detector(DEFAULT_MODEL, threads=1)
-    assert 0.4 < tiles.score_threshold < 0.7  # the best-F1 score on renders 3-5 m up (model card)
-    assert general.score_threshold == SCORE_THRESHOLD
+    assert 0.3 < tiles.score_threshold < 0.5  # the best-F1 score on renders 3-5 m up (model card), on the general model's scale
+    assert 0.5 < tiles.score_map.raw(tiles.score_threshold) < 0.6  # FastestDet's own score there
+    assert general.score_threshold == SCORE_THRESHOLD and general.score_map.is_identity
 
 
 def test_fixed_size_models_get_a_letterbox() -> None:

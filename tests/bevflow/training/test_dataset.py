@@ -94,3 +94,18 @@ def test_a_zoomed_render_draws_the_same_scene_through_a_longer_focal_length() ->
     assert zoomed.camera_height_m == plain.camera_height_m
     assert zoomed.focal_px == pytest.approx(1.2 * plain.focal_px)
     assert zoomed.image.shape[0] > 1.15 * plain.image.shape[0]  # the whole frame, 1.2 x larger
+
+
+@pytest.mark.parametrize("frame_px", [256, 700])
+def test_a_frame_of_a_camera_s_size_draws_the_same_scene_sharper(frame_px: int) -> None:
+    """``frame_px``: the frame a camera's sensor gives, the same people where they were, scaled."""
+    plain = render_sample(np.random.default_rng([9, 0]), size=None, heights=(3.0, 4.0), min_pixels=30)
+    sized = render_sample(np.random.default_rng([9, 0]), size=None, heights=(3.0, 4.0), min_pixels=30, frame_px=frame_px)
+    k = frame_px / plain.image.shape[1]
+    assert sized.image.shape[:2] == (frame_px, frame_px)
+    assert sized.camera_height_m == plain.camera_height_m
+    assert sized.focal_px == pytest.approx(k * plain.focal_px)
+    assert plain.xyxy is not None and sized.xyxy is not None and len(plain.xyxy) > 2
+    # Each person of the plain frame is boxed in the sharp one where the enlargement puts them.
+    near = np.abs(sized.xyxy[None, :, :] - k * plain.xyxy[:, None, :]).max(axis=2).min(axis=1)
+    assert np.all(near < 2.5 * k)

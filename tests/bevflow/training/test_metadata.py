@@ -10,7 +10,8 @@ onnx = pytest.importorskip("onnx")
 
 from onnx import TensorProto, helper  # noqa: E402
 
-from bevflow.training.metadata import set_metadata, set_score_threshold  # noqa: E402
+from bevflow.detect.confidence import ScoreMap  # noqa: E402
+from bevflow.training.metadata import set_metadata, set_score_map, set_score_threshold  # noqa: E402
 
 
 def _model(path: Path, props: dict[str, str]) -> Path:
@@ -40,3 +41,10 @@ def test_a_threshold_outside_0_to_1_is_refused_before_the_file_is_touched(tmp_pa
     with pytest.raises(ValueError, match="between 0 and 1"):
         set_score_threshold(path, threshold)
     assert path.read_bytes() == before
+
+
+def test_a_score_map_is_kept_as_the_detector_reads_it(tmp_path: Path) -> None:
+    path = _model(tmp_path / "m.onnx", {"bevflow.score_threshold": "0.41"})
+    set_score_map(path, ScoreMap(0.568162, -0.507443))
+    assert _props(path) == {"bevflow.score_threshold": "0.41", "bevflow.score_map": "0.568162 -0.507443"}
+    assert ScoreMap.from_text(_props(path)["bevflow.score_map"]) == ScoreMap(0.568162, -0.507443)
