@@ -104,8 +104,12 @@ def fit_score_map(model: tuple[ArrayLike, ArrayLike], reference: tuple[ArrayLike
     a model score goes to the reference score with the same fitted chance of being right."""
     a_m, b_m = fit_platt(*model)
     a_r, b_r = fit_platt(*reference)
-    if not (_SLOPES[0] < a_m < _SLOPES[1] and _SLOPES[0] < a_r < _SLOPES[1]):
-        raise ValueError(f"the scores say little about being right (fitted slopes {a_m:.3g}, {a_r:.3g}): no map fitted")
+    slopes = f"fitted slopes {a_m:.3g} for the model, {a_r:.3g} for the reference"
+    if min(a_m, a_r) <= _SLOPES[0]:
+        raise ValueError(f"the scores say little about being right ({slopes}): no map fitted")
+    if max(a_m, a_r) >= _SLOPES[1]:
+        raise ValueError(f"a score splits the boxes judged right from the wrong ones too cleanly to fit ({slopes}): "
+                         "too few boxes? give more frames")  # fmt: skip
     return ScoreMap(slope=a_m / a_r, offset=(b_m - b_r) / a_r)
 
 

@@ -82,3 +82,11 @@ def test_scores_that_say_nothing_about_being_right_fit_no_map() -> None:
     noise = (rng.uniform(0.02, 0.98, 5000), rng.random(5000) < 0.5)
     with pytest.raises(ValueError, match="say little about being right"):
         fit_score_map(noise, _judged(rng, 3.6, 0.3))
+
+
+def test_boxes_split_cleanly_by_score_are_too_few_to_fit_and_say_so() -> None:
+    rng = np.random.default_rng(4)
+    scores = rng.uniform(0.05, 0.95, 400)
+    clean = (scores, scores > 0.5)  # every box above 0.5 right, every one below wrong: the slope runs away
+    with pytest.raises(ValueError, match="too cleanly to fit .* give more frames"):
+        fit_score_map(clean, _judged(rng, 3.6, 0.3))
