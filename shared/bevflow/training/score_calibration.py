@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bevflow.detect.confidence import ScoreMap, fit_score_map
+from bevflow.detect.rotated import radial_boxes
 from bevflow.detect.runtime import DEFAULT_MODEL, DEFAULT_RANGES, Detector
 from bevflow.detect.tiles import CENTRE_MODEL, RimTileDetector
 from bevflow.detections import Boxes
@@ -59,16 +60,14 @@ class _AsASiteRunsThem:
                      centre: tuple[float, float]) -> tuple[Boxes, FloatArray]:  # fmt: skip
         if camera_height_m < RIM_TILES_BELOW_M:
             return self.tiles.detect_boxes(image_bgr, camera_height_m, focal_px, centre)
-        from bevflow.detect.rotated import radial_boxes
-
         boxes = self.general.detect(image_bgr, camera_height_m, focal_px)
         return boxes, radial_boxes(boxes.xyxy, centre)
 
 
 def calibrate_tile_scores(tile_model: Path, annotations: Path, images_dir: Path | None = None, threads: int = 2) -> ScoreCalibration:
     """Fit ``tile_model``'s ``ScoreMap`` on the frames of a COCO file whose images carry their
-    camera's height and focal length (``render-eval`` writes them). ValueError where the frames
-    give one of the models no box judged right or none judged wrong."""
+    camera's height and focal length (``render-eval`` writes them). ValueError, saying why, where
+    the frames lack those or give either model too few boxes to fit (``fit_score_map``)."""
     tiles = RimTileDetector(Detector(tile_model, threads=1, score_threshold=SCORE_FLOOR, score_map=ScoreMap()),
                             centre=Detector(CENTRE_MODEL, threads=1, score_threshold=SCORE_FLOOR), workers=threads)  # fmt: skip
     general = Detector(DEFAULT_MODEL, threads=threads, score_threshold=SCORE_FLOOR)
