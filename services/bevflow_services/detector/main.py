@@ -74,8 +74,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        help="ONNX Runtime threads per inference (default: the usable CPU cores shared among the "
                        "workers, at least 1)")
     group.add_argument("--score-threshold", type=float, default=None,
-                       help="lowest confidence of a reported person, 0 to 1, for every model (default: each model's own, "
-                       f"kept in its file, else {SCORE_THRESHOLD:g})")
+                       help="lowest confidence of a reported person, 0 to 1, for every model: each model file maps its "
+                       "scores onto one scale (default: each model's own threshold, kept in its file, else "
+                       f"{SCORE_THRESHOLD:g})")  # fmt: skip
     group.add_argument("--providers", default=None, metavar="LIST",
                        help="ONNX Runtime execution providers, most wanted first, e.g. cuda,cpu or openvino,cpu "
                        "(default: the site file's detector_providers, else cpu); missing ones fall back with a warning")
