@@ -33,7 +33,7 @@ SCORE_MAP_METADATA_KEY = "bevflow.score_map"
 """ONNX metadata: ``"SLOPE OFFSET"`` of the model's ``ScoreMap`` (written by ``bevflow
 train-detector calibrate-scores``); a model without it scores on the general model's scale."""
 _EPS = 1e-9  # scores are clipped this far inside 0 and 1 before the logit
-_SLOPES = (0.05, 20.0)  # a fitted slope outside these says the fit found nothing to go on
+_SLOPES = (0.05, 20.0)  # fitted slopes below say the scores mean nothing; above, too few boxes to fit
 
 
 @dataclass(frozen=True)

@@ -290,8 +290,7 @@ def _model_score_threshold(session: InferenceSession) -> float:
 
 
 def _model_score_map(session: InferenceSession) -> ScoreMap:
-    meta = getattr(session, "get_modelmeta", None)  # test doubles may have none
-    text = meta().custom_metadata_map.get(SCORE_MAP_METADATA_KEY) if meta is not None else None
+    text = _metadata_text(session, SCORE_MAP_METADATA_KEY)
     if text is None:
         return ScoreMap()
     try:
@@ -300,10 +299,16 @@ def _model_score_map(session: InferenceSession) -> ScoreMap:
         raise DetectorError(f"model metadata {SCORE_MAP_METADATA_KEY}: {exc}") from None
 
 
-def _metadata_number(session: InferenceSession, key: str, default: float, low: float, high: float) -> float:
-    """The number the model file keeps under ``key`` (``default`` where it keeps none)."""
+def _metadata_text(session: InferenceSession, key: str) -> str | None:
+    """What the model file keeps under ``key``, None where it keeps nothing."""
     meta = getattr(session, "get_modelmeta", None)  # test doubles may have none
     value = meta().custom_metadata_map.get(key) if meta is not None else None
+    return None if value is None else str(value)
+
+
+def _metadata_number(session: InferenceSession, key: str, default: float, low: float, high: float) -> float:
+    """The number the model file keeps under ``key`` (``default`` where it keeps none)."""
+    value = _metadata_text(session, key)
     if value is None:
         return default
     try:

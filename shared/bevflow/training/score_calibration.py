@@ -19,10 +19,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bevflow.detect.confidence import ScoreMap, fit_score_map
-from bevflow.detect.rotated import radial_boxes
-from bevflow.detect.runtime import DEFAULT_MODEL, DEFAULT_RANGES, Detector
-from bevflow.detect.tiles import CENTRE_MODEL, RimTileDetector
-from bevflow.detections import Boxes
+from bevflow.detect.runtime import DEFAULT_RANGES, DetectorBank
+from bevflow.detect.tiles import RIM_TILES, RimTileDetector
 from bevflow.evaluation.detector import FrameResult, detect_frames, in_crowd, match_image, score_frames
 
 FloatArray = NDArray[np.float64]
@@ -46,32 +44,16 @@ class ScoreCalibration:
                 "AP50_raw": round(self.ap50_raw, 4), "AP50_mapped": round(self.ap50_mapped, 4)}  # fmt: skip
 
 
-class _AsASiteRunsThem:
-    """The rim tiles under ``RIM_TILES_BELOW_M``, the general model from there up."""
-
-    def __init__(self, tiles: RimTileDetector, general: Detector) -> None:
-        self.tiles, self.general = tiles, general
-
-    def detect(self, image_bgr: NDArray[np.uint8], camera_height_m: float, focal_px: float) -> Boxes:
-        h, w = image_bgr.shape[:2]
-        return self.detect_boxes(image_bgr, camera_height_m, focal_px, ((w - 1) / 2, (h - 1) / 2))[0]
-
-    def detect_boxes(self, image_bgr: NDArray[np.uint8], camera_height_m: float, focal_px: float,
-                     centre: tuple[float, float]) -> tuple[Boxes, FloatArray]:  # fmt: skip
-        if camera_height_m < RIM_TILES_BELOW_M:
-            return self.tiles.detect_boxes(image_bgr, camera_height_m, focal_px, centre)
-        boxes = self.general.detect(image_bgr, camera_height_m, focal_px)
-        return boxes, radial_boxes(boxes.xyxy, centre)
-
-
 def calibrate_tile_scores(tile_model: Path, annotations: Path, images_dir: Path | None = None, threads: int = 2) -> ScoreCalibration:
     """Fit ``tile_model``'s ``ScoreMap`` on the frames of a COCO file whose images carry their
     camera's height and focal length (``render-eval`` writes them). ValueError, saying why, where
     the frames lack those or give either model too few boxes to fit (``fit_score_map``)."""
-    tiles = RimTileDetector(Detector(tile_model, threads=1, score_threshold=SCORE_FLOOR, score_map=ScoreMap()),
-                            centre=Detector(CENTRE_MODEL, threads=1, score_threshold=SCORE_FLOOR), workers=threads)  # fmt: skip
-    general = Detector(DEFAULT_MODEL, threads=threads, score_threshold=SCORE_FLOOR)
-    results, _ = detect_frames(_AsASiteRunsThem(tiles, general), annotations, images_dir)
+    low, high = DEFAULT_RANGES
+    bank = DetectorBank((replace(low, model=f"{RIM_TILES}:{tile_model}"), high), threads=threads, score_threshold=SCORE_FLOOR)
+    tiles = bank.for_height(low.min_m)
+    assert isinstance(tiles, RimTileDetector)
+    tiles.tile_detector.score_map = ScoreMap()  # judged by its raw scores, whatever map its file keeps
+    results, _ = detect_frames(bank, annotations, images_dir)
     from_tiles = [_tile_boxes(tiles, r) for r in results]
     scores, right, counted = (np.concatenate(x) for x in zip(*[_judged(r) for r in results], strict=True))
     tiled = np.concatenate(from_tiles)
