@@ -323,6 +323,14 @@ def with_position_covariance(
     return replace(cylinders, covariance=position_covariance(cylinders, cameras, noise))
 
 
+def with_covariance_where_missing(
+    cylinders: Cylinders, cameras: Sequence[Camera], noise: PositionNoise = PositionNoise()
+) -> Cylinders:
+    """``cylinders`` keeping the covariances they carry, with ``position_covariance`` for the rows
+    that carry none: views as the projector sends them, whoever made them."""
+    return replace(cylinders, covariance=_carried_or_computed_covariance(cylinders, cameras, noise))
+
+
 def _carried_or_computed_covariance(rows: Cylinders, cameras: Sequence[Camera], noise: PositionNoise) -> FloatArray:
     """The rows' own covariances where they carry a finite one, ``position_covariance`` elsewhere."""
     if rows.covariance is None:

@@ -52,6 +52,9 @@ def add_replay_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--hypotheses", type=int, metavar="N",
                        help="hold N ways of matching tracks to people open for two seconds before deciding, instead of "
                        "the site's track_hypotheses (1: decide at every update)")
+    group.add_argument("--fuse-first", action="store_true",
+                       help="fuse every camera's views into people before tracking them (the site's track_views false), "
+                       "instead of letting each track take its views from every camera (the default): to compare the two")
     group.add_argument("--tracks-out", type=Path, metavar="FILE", help="write the online tracks as frame,id,x,y lines")
     perturbation = BoxPerturbation()
     group.add_argument("--perturb", type=int, default=0, metavar="N",
@@ -86,6 +89,8 @@ def run_replay(args: argparse.Namespace) -> tuple[ReplayEvaluation, dict[str, An
         raise UserError(str(exc)) from None
     if args.hypotheses is not None:
         site = with_hypotheses(site, args.hypotheses)
+    if args.fuse_first:
+        site = site.model_copy(update={"thresholds": site.thresholds.model_copy(update={"track_views": False})})
     area = parse_area(args.area, site)
     try:
         recording = read_detections(args.detections, {c.id: c.image_size for c in site.cameras})
@@ -162,7 +167,8 @@ def format_replay(r: ReplayEvaluation, site: Site) -> str:
             f"boxes of confidence >= {r.min_confidence:g}, matched within {r.threshold_m:g} m; tracker: "
             f"{c.activate_hits} hits to confirm, {c.max_misses} misses to drop, gate {c.gate_m:g} m"
             + ("" if c.gate_chi2 is None else f" and chi2 {c.gate_chi2:g} of the prediction")
-            + ("" if c.hypotheses == 1 else f", {c.hypotheses} hypotheses over {c.hypothesis_window_s:g} s"))
+            + ("" if c.hypotheses == 1 else f", {c.hypotheses} hypotheses over {c.hypothesis_window_s:g} s")
+            + (", each camera's views matched to the tracks" if c.track_views else ", views fused before tracking"))
     columns = f"{'':<9} {'MODA':>6} {'MOTA':>6} {'IDF1':>6} {'HOTA':>6} {'DetA':>6} {'AssA':>6} {'IDSW':>5} {'prec':>6} {'recall':>6} {'APE m':>6} {'frames':>6}"
     rows = [head, columns]
     for name, s, h in (("online", r.scores, r.hota), ("settled", r.settled, r.settled_hota)):

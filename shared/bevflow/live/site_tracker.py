@@ -1,5 +1,9 @@
 """One step of the site's central stage: fuse the cameras' cylinders, track, analyse.
 
+The tracks take the cameras' views themselves where the site says so (``track_views``, the
+default; ``bevflow.tracking.views``), and the fusion of the tick is then what is reported of it
+(the fused people, the sightings); otherwise they follow the fused people.
+
 The tracker service calls ``SiteTracker.step`` once per tick (``bevflow.live.assembler``) and
 publishes what comes back as it is: the tracks, the occupancy and the events are wire messages.
 The evaluation suite calls the same step, so what is scored is what runs live.
@@ -16,7 +20,8 @@ from bevflow.analytics.engine import AnalyticsTick, SiteAnalytics
 from bevflow.detections import Cylinders
 # fuse_cylinders is looked up here at each step, so the tracking benchmark can time it by
 # wrapping this name: re-exported for that.
-from bevflow.fusion import Fusion
+from bevflow import fusion as fusion_rules
+from bevflow.fusion import Fusion, with_covariance_where_missing
 from bevflow.fusion import fuse_cylinders as fuse_cylinders
 from bevflow.schemas import DistanceIncident, DistanceViolation, Occupancy, OverCapacity, Tracks
 from bevflow.site import Site
@@ -54,7 +59,7 @@ class SiteTracker:
         self.camera_ids = site.camera_ids
         self.cameras = [site.camera(c) for c in self.camera_ids]
         config = tracker_config or TrackerConfig.from_thresholds(site.thresholds)
-        self.tracker = online_tracker(config, first_id, keep_final)
+        self.tracker = online_tracker(config, first_id, keep_final, fuse=self._fuse_left_over)
         self.analytics = SiteAnalytics(site)
         self._alone = [[c] for c in self.camera_ids]  # shared lists, read only: serialised as they are
 
@@ -63,12 +68,23 @@ class SiteTracker:
         ``per_camera`` saw nothing this tick or did not report)."""
         seen = self._merge_cameras(per_camera)
         time_s = time_ns / 1e9
-        expected = self.tracker.predicted(time_s)  # the confirmed tracks guide fusion ("Tracks as priors")
-        fusion = fuse_cylinders(seen, self.cameras, self.site.thresholds.fusion_distance_m, priors=expected)
-        table = self.tracker.update(fusion.fused, time_s, fusion.sightings)
+        if self.tracker.config.track_views:
+            # The tracks take the views themselves; the fusion is only what the step reports of
+            # the instant (the fused people, the sightings), so it needs no priors: matching the
+            # views to them again cost a dense solve a tick in a crush.
+            fusion = fuse_cylinders(seen, self.cameras, self.site.thresholds.fusion_distance_m)
+        else:
+            expected = self.tracker.predicted(time_s)  # the confirmed tracks guide fusion ("Tracks as priors")
+            fusion = fuse_cylinders(seen, self.cameras, self.site.thresholds.fusion_distance_m, priors=expected)
+        if self.tracker.config.track_views:
+            views = with_covariance_where_missing(seen, self.cameras)  # each view's weight in its track
+            table = self.tracker.update(views, time_s, fusion.sightings)
+            cameras = self._cameras_of_views(table, seen.camera)
+        else:
+            table = self.tracker.update(fusion.fused, time_s, fusion.sightings)
+            seen_by = self._cameras_of_fused(fusion, seen.camera)
+            cameras = [seen_by[d] if d >= 0 else [] for d in table.detection.tolist()]
         tick = self.analytics.update(time_ns, table.id, table.xy, table.velocity)
-        seen_by = self._cameras_of_fused(fusion, seen.camera)
-        cameras = [seen_by[d] if d >= 0 else [] for d in table.detection.tolist()]
         tracks = Tracks.wire_json(self.site.site, time_ns, table, cameras, tick.zones_by_row, tick.violations.tolist())
         return SiteStep(tracks, tick.occupancy, tick.events, fusion, table, tick)
 
@@ -78,6 +94,22 @@ class SiteTracker:
         parts = [per_camera[self.camera_ids[i]] for i in index]
         seen = Cylinders.merge(parts)
         return replace(seen, camera=np.repeat(np.asarray(index, dtype=np.int64), [len(p) for p in parts]))
+
+    def _fuse_left_over(self, views: Cylinders) -> Cylinders:
+        """The people that views no track took place, fused without priors (``track_views`` births)."""
+        # Not through this module's fuse_cylinders, which the tracking benchmark times as the
+        # fusion stage: these fusions are part of the tracker's update.
+        return fusion_rules.fuse_cylinders(views, self.cameras, self.site.thresholds.fusion_distance_m).fused
+
+    def _cameras_of_views(self, table: TrackTable, input_cameras: np.ndarray) -> list[list[str]]:
+        """For each track of ``table``, the ids of the cameras whose views it took this tick, in
+        site camera order (``track_views``)."""
+        keys = self.tracker.view_keys()
+        took = keys >= 0
+        by_key: dict[int, list[str]] = {}
+        for key, camera in sorted(set(zip(keys[took].tolist(), input_cameras[took].tolist(), strict=True))):
+            by_key.setdefault(key, []).append(self.camera_ids[camera])
+        return [by_key.get(key, []) for key in table.key.tolist()]
 
     def _cameras_of_fused(self, fusion: Fusion, input_cameras: np.ndarray) -> list[list[str]]:
         """For each fused person, the ids of the cameras whose cylinders were merged into it, in

@@ -25,8 +25,11 @@ What is reported carries ids of its own (``_PublishedIds``), given in sequence f
 as each track is first reported, so that the ids a site sees count its people, not its
 hypotheses (replaying CMC2 with 20, they confirmed 535 tracks, of which 30 were reported).
 
-Fusion takes the best hypothesis's predictions as its priors (``bevflow.live.site_tracker``):
-fusing once per hypothesis scored the same on CMC2 at many times the cost.
+Where the tracks take the cameras' views themselves (``TrackerConfig.track_views``, a site's
+default), a matching gives each track at most one view of each camera (``bevflow.tracking.views``),
+and the hypotheses differ in which view went to which track. Otherwise fusion takes the best
+hypothesis's predictions as its priors (``bevflow.live.site_tracker``): fusing once per hypothesis
+scored the same on CMC2 at many times the cost.
 
 On CMC2 (``docs/RESULTS.md``; four side cameras, 10 people at 4 fps) 20 hypotheses raised the
 six perturbed copies' IDF1 0.529 → 0.610 and MOTA 0.862 → 0.877 (the output decided 2 s late:
@@ -51,7 +54,7 @@ import numpy as np
 
 from bevflow.detections import Cylinders
 from bevflow.metrics.ranked_matching import RankingMemo
-from bevflow.tracking.tracker import Tracker, TrackerConfig, TrackTable
+from bevflow.tracking.tracker import Fuse, IntArray, Tracker, TrackerConfig, TrackTable
 
 BRANCHES = 5
 """Choices each hypothesis offers per update (the best and four runners-up)."""
@@ -119,10 +122,12 @@ class HypothesisTracker:
     ``keep_final``: keep each update as it is made final, for ``final`` and ``finish`` (an
     evaluation's settled output); the live tracker asks for none and keeps none."""
 
-    def __init__(self, config: TrackerConfig | None = None, first_id: int = 1, keep_final: bool = False) -> None:
+    def __init__(self, config: TrackerConfig | None = None, first_id: int = 1, keep_final: bool = False,
+                 fuse: Fuse | None = None) -> None:  # fmt: skip
         self.config = config or TrackerConfig()
         self.keep_final = keep_final
-        self._hypotheses = [_Hypothesis(0.0, Tracker(self.config), _Decision(float("-inf"), None, None))]
+        self._fuse = fuse
+        self._hypotheses = [_Hypothesis(0.0, Tracker(self.config, fuse=fuse), _Decision(float("-inf"), None, None))]
         self._final: list[tuple[float, TrackTable]] = []
         self._published = _PublishedIds(int(first_id))
 
@@ -142,7 +147,7 @@ class HypothesisTracker:
 
     def reset(self) -> None:
         """Forget every track, hypothesis and the clock; ids keep counting from where they were."""
-        self._hypotheses = [_Hypothesis(0.0, Tracker(self.config), _Decision(float("-inf"), None, None))]
+        self._hypotheses = [_Hypothesis(0.0, Tracker(self.config, fuse=self._fuse), _Decision(float("-inf"), None, None))]
         self._final = []
         self._published = _PublishedIds(self.next_id)
 
@@ -151,6 +156,9 @@ class HypothesisTracker:
 
     def predicted(self, time_s: float, include_tentative: bool = False) -> Cylinders:
         return self.best.predicted(time_s, include_tentative)
+
+    def view_keys(self) -> IntArray:
+        return self.best.view_keys()
 
     def update(self, cylinders: Cylinders, time_s: float, sightings: Cylinders | None = None) -> TrackTable:
         """As ``Tracker.update``: the best hypothesis's tracks after every hypothesis took the
@@ -224,12 +232,13 @@ class HypothesisTracker:
         return held
 
 
-def online_tracker(config: TrackerConfig, first_id: int = 1, keep_final: bool = False) -> Tracker | HypothesisTracker:
+def online_tracker(config: TrackerConfig, first_id: int = 1, keep_final: bool = False,
+                   fuse: Fuse | None = None) -> Tracker | HypothesisTracker:  # fmt: skip
     """The tracker ``config`` asks for: several hypotheses (keeping their final updates where
-    ``keep_final``), or the plain one."""
+    ``keep_final``), or the plain one. ``fuse``: as for ``Tracker``."""
     if config.hypotheses > 1:
-        return HypothesisTracker(config, first_id, keep_final)
-    return Tracker(config, first_id)
+        return HypothesisTracker(config, first_id, keep_final, fuse)
+    return Tracker(config, first_id, fuse)
 
 
 def final_updates(tracker: Tracker | HypothesisTracker, time_s: float) -> list[tuple[float, TrackTable]]:

@@ -59,6 +59,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, fields, replace
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -69,6 +70,7 @@ from bevflow.matrix2 import determinant, mahalanobis2
 from bevflow.metrics.matching import assign_edges, gated_pairs
 from bevflow.metrics.ranked_matching import RankingMemo, ranked_matchings
 from bevflow.tracking.kalman import ConstantVelocityKalman, smooth
+from bevflow.tracking.views import TENTATIVE_COST, fuse_views, leftover_cost, slot_rows
 
 if TYPE_CHECKING:  # the tracker reads a site's thresholds but needs no site to run
     from bevflow.site import Thresholds
@@ -76,6 +78,11 @@ if TYPE_CHECKING:  # the tracker reads a site's thresholds but needs no site to 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 BoolArray = NDArray[np.bool_]
+KEYS_REMEMBERED = 4096
+"""Confirmed tracks whose id is remembered by their key (``_Numbering``), the oldest forgotten first."""
+
+Fuse = Callable[[Cylinders], Cylinders]
+"""Views of several cameras in, the people they place out (``Tracker``'s ``fuse``)."""
 
 
 @dataclass(frozen=True)
@@ -129,6 +136,13 @@ class TrackerConfig:
     - ``hypotheses``: how many ways of matching are held open (``bevflow.tracking.hypotheses``;
       1: each update decides at once, this class alone), for ``hypothesis_window_s`` seconds
       before the likeliest one's decisions are final. More than 1 needs ``gate_chi2``.
+    - ``track_views``: ``update`` takes each camera's views as they are (``Cylinders.camera`` the
+      camera's index), not fused detections: every track takes at most one view from each camera
+      and is corrected with those it took, and only the strong views no track took are fused (by
+      the tracker's ``fuse``) to start tracks outside the gate of every track that took a view
+      (``bevflow.tracking.views``). Weak views are matched with the strong ones in one pass (they
+      still start nothing); a confirmed track that took no view may then take a strong one left
+      over within ``lost_speed_mps``, as in the other mode. Needs ``gate_chi2``.
     """
 
     gate_m: float = 1.5
@@ -151,10 +165,13 @@ class TrackerConfig:
     lost_speed_mps: float | None = 2.0
     hypotheses: int = 1
     hypothesis_window_s: float = 2.0
+    track_views: bool = False
 
     def __post_init__(self) -> None:
         if self.hypotheses > 1 and self.gate_chi2 is None:
             raise ValueError("TrackerConfig.hypotheses > 1 needs the uncertainty gate (gate_chi2)")
+        if self.track_views and self.gate_chi2 is None:
+            raise ValueError("TrackerConfig.track_views needs the uncertainty gate (gate_chi2)")
         if self.lost_speed_mps is not None and not self.lost_speed_mps > 0:
             raise ValueError(f"TrackerConfig.lost_speed_mps must be > 0 or None, got {self.lost_speed_mps}")
         names = ("gate_m", "weak_gate_m", "measurement_std_m", "initial_speed_std_mps", "sighting_gate_chi2",
@@ -173,13 +190,14 @@ class TrackerConfig:
     @classmethod
     def from_thresholds(cls, thresholds: Thresholds, **overrides: Any) -> TrackerConfig:
         """Settings from a site's ``Thresholds`` (track_gate_m, track_activate_hits,
-        track_max_misses, track_hypotheses); ``overrides`` set any other field (checked as the
-        fields are)."""
+        track_max_misses, track_hypotheses, track_views); ``overrides`` set any other field
+        (checked as the fields are)."""
         site = cls(
             gate_m=thresholds.track_gate_m,
             activate_hits=thresholds.track_activate_hits,
             max_misses=thresholds.track_max_misses,
             hypotheses=thresholds.track_hypotheses,
+            track_views=thresholds.track_views,
         )
         return replace(site, **overrides)
 
@@ -299,10 +317,22 @@ class Choice:
 @dataclass(eq=False)
 class _Numbering:
     """The next id and the next key, shared by a tracker and its copies (``Tracker.copy``), so
-    that no two tracks of any of them ever get the same one."""
+    that no two tracks of any of them ever get the same one. A track confirmed in two copies
+    (hypotheses that matched it differently) is one track: it gets one id (``id_of``)."""
 
     next_id: int
     next_key: int = 0
+    ids_by_key: dict[int, int] = field(default_factory=dict)
+
+    def id_of(self, key: int) -> int:
+        """The id of the track born as ``key``, given now if no copy has confirmed it yet."""
+        if (known := self.ids_by_key.get(key)) is not None:
+            return known
+        self.ids_by_key[key], self.next_id = self.next_id, self.next_id + 1
+        if len(self.ids_by_key) > KEYS_REMEMBERED:  # copies confirm a track within a few updates of each other
+            for old in list(self.ids_by_key)[: KEYS_REMEMBERED // 2]:
+                del self.ids_by_key[old]
+        return self.ids_by_key[key]
 
 
 @dataclass(frozen=True, eq=False)
@@ -320,18 +350,25 @@ class _Passes:
 class Tracker:
     """One online tracker for a whole site; see the module docstring."""
 
-    def __init__(self, config: TrackerConfig | None = None, first_id: int = 1) -> None:
+    def __init__(self, config: TrackerConfig | None = None, first_id: int = 1, fuse: Fuse | None = None) -> None:
+        """``fuse``: how views left over are fused to start tracks, needed with ``track_views``
+        (``bevflow.live.site_tracker`` passes ``bevflow.fusion`` with the site's cameras)."""
         self.config = config or TrackerConfig()
+        if self.config.track_views and fuse is None:
+            raise ValueError("TrackerConfig.track_views needs a fuse function to start tracks from the views left over")
+        self._fuse = fuse
         self._kalman = self.config.kalman()
         self._numbering = _Numbering(int(first_id))
         self._tracks = _Tracks()
         self._time_s: float | None = None
+        self._view_keys = np.zeros(0, np.int64)
 
     def copy(self) -> Tracker:
         """An independent tracker in the same state, numbering ids and keys from the same counter
         as this one: whatever either confirms later gets an id the other never gives."""
         twin = Tracker.__new__(Tracker)
         twin.config, twin._kalman, twin._numbering, twin._time_s = self.config, self._kalman, self._numbering, self._time_s
+        twin._fuse, twin._view_keys = self._fuse, self._view_keys
         twin._tracks = _Tracks(**{f.name: getattr(self._tracks, f.name).copy() for f in fields(self._tracks)})
         return twin
 
@@ -378,6 +415,11 @@ class Tracker:
         self._update(cylinders, time_s, dt, self._candidates(cylinders), None)
         return self.report(sightings)
 
+    def view_keys(self) -> IntArray:
+        """With ``track_views``: after an update, the ``key`` of the track each of its views went
+        to, −1 for views no track took (the cameras that saw each track)."""
+        return self._view_keys.copy()
+
     def branch(self, cylinders: Cylinders, time_s: float, count: int, within: float,
                memo: RankingMemo | None = None) -> Branches:  # fmt: skip
         """The ways this tracker may take an update, one per way of matching the confirmed tracks
@@ -399,8 +441,43 @@ class Tracker:
         moved = self.copy()
         dt = moved._predict(time_s)
         candidates = moved._candidates(cylinders)
-        choices = moved._choices(len(cylinders), candidates, chi2, count, within, memo)
+        if self.config.track_views:
+            choices = moved._view_choices(cylinders, candidates, chi2, count, within, memo)
+        else:
+            choices = moved._choices(len(cylinders), candidates, chi2, count, within, memo)
         return Branches(choices, moved, cylinders, float(time_s), dt, candidates)
+
+    def _view_pairs(self, cylinders: Cylinders, candidates: _Passes, chi2: float) -> tuple[IntArray, IntArray, FloatArray, int]:
+        """With ``track_views``: the (slot, view) pairs worth making and their costs, and how many
+        cameras the slots are cut for (``bevflow.tracking.views``)."""
+        pairs = candidates.pairs
+        if pairs.d2 is None or pairs.log_det is None:
+            raise ValueError("views are matched by the pairs' likelihoods (the uncertainty gate)")
+        if len(cylinders) and cylinders.camera.min() < 0:
+            raise ValueError("TrackerConfig.track_views takes each camera's views (camera >= 0), not fused detections")
+        n_cameras = int(cylinders.camera.max()) + 1 if len(cylinders) else 1
+        tentative = np.where(self._tracks.confirmed[pairs.track], 0.0, TENTATIVE_COST)
+        cost = pairs.d2 + pairs.log_det + tentative
+        usable = candidates.strong | candidates.weak
+        keep = usable[pairs.det] & (cost < 2.0 * leftover_cost(chi2))
+        rows = slot_rows(pairs.track[keep], cylinders.camera[pairs.det[keep]], n_cameras)
+        return rows, pairs.det[keep], cost[keep], n_cameras
+
+    def _view_choices(self, cylinders: Cylinders, candidates: _Passes, chi2: float, count: int, within: float,
+                      memo: RankingMemo | None) -> list[Choice]:  # fmt: skip
+        """``branch``'s ranked matchings of views to slots; a choice's ``track`` repeats a track
+        once for each view it takes. Costed as ``_choices`` is, but a slot left over is free."""
+        rows, cols, cost, n_cameras = self._view_pairs(cylinders, candidates, chi2)
+        leftover = leftover_cost(chi2)
+        n_views = int((candidates.strong | candidates.weak).sum())
+        ranked = ranked_matchings(rows, cols, cost, len(self._tracks) * n_cameras, len(cylinders), leftover, count,
+                                  within, memo)  # fmt: skip
+        best = ranked[0]
+        taken_by = np.full(len(self._tracks) * n_cameras, -1, dtype=np.int64)
+        taken_by[best.rows] = best.cols
+        paid = float(cost[taken_by[rows] == cols].sum())
+        base = paid + leftover * (n_views - 2 * len(best.rows))
+        return [Choice(m.rows // n_cameras, m.cols, base + m.extra) for m in ranked]
 
     def _choices(self, n_detections: int, candidates: _Passes, chi2: float, count: int, within: float,
                  memo: RankingMemo | None) -> list[Choice]:  # fmt: skip
@@ -425,6 +502,9 @@ class Tracker:
     def _update(self, cylinders: Cylinders, time_s: float, dt: float, candidates: _Passes, choice: Choice | None) -> None:
         """``update`` after the prediction: the association passes (the first one as ``choice``
         has it, where given), the filters' correction, confirmations, retirements and births."""
+        if self.config.track_views:
+            self._update_views(cylinders, time_s, dt, candidates, choice)
+            return
         cfg = self.config
         tracks = self._tracks
         strong, weak, near, pairs = candidates.strong, candidates.weak, candidates.near, candidates.pairs
@@ -447,6 +527,92 @@ class Tracker:
         self._confirm()
         self._retire()
         self._birth(cylinders, strong & ~taken, time_s)
+
+    def _update_views(self, cylinders: Cylinders, time_s: float, dt: float, candidates: _Passes,
+                      choice: Choice | None) -> None:  # fmt: skip
+        """``_update`` with ``track_views``: views to slots (as ``choice`` has it, or the best
+        matching), then a confirmed track that took none may take a strong view left over within
+        ``lost_speed_mps`` (as in ``_update``), each track is corrected with its views fused, and
+        the views still left over may start tracks."""
+        cfg = self.config
+        owner = np.full(len(cylinders), -1, dtype=np.int64)
+        if choice is not None:
+            owner[choice.detection] = choice.track
+        else:
+            chi2 = cfg.gate_chi2
+            assert chi2 is not None  # TrackerConfig requires it with track_views
+            rows, cols, cost, n_cameras = self._view_pairs(cylinders, candidates, chi2)
+            r, c = assign_edges(rows, cols, cost, len(self._tracks) * n_cameras, len(cylinders), leftover_cost(chi2))
+            owner[c] = r // n_cameras
+        if cfg.lost_speed_mps is not None and len(self._tracks):
+            tracks = self._tracks
+            unseen = np.ones(len(tracks), dtype=bool)
+            unseen[owner[owner >= 0]] = False
+            gate = min(cfg.gate_m, cfg.lost_speed_mps * dt)
+            self._associate(candidates.near, tracks.confirmed & unseen, candidates.strong & (owner < 0), gate)
+            found = np.flatnonzero(tracks.detection >= 0)
+            owner[tracks.detection[found]] = found
+        self._correct_views(cylinders, owner)
+        keys = np.where(owner >= 0, self._tracks.key[np.maximum(owner, 0)], -1) if len(self._tracks) else owner
+        self._view_keys = keys
+        self._confirm()
+        self._retire()
+        self._birth_from_views(cylinders, candidates.strong & (owner < 0), time_s)
+
+    def _correct_views(self, cylinders: Cylinders, owner: IntArray) -> None:
+        """Correct each track with the views it took (``owner``: each view's track row, or −1),
+        fused by their information (``bevflow.tracking.views.fuse_views``)."""
+        tracks, weight = self._tracks, self.config.shape_smoothing
+        det = np.flatnonzero(owner >= 0)
+        hit = np.zeros(len(tracks), dtype=bool)
+        if len(det):
+            covariance = self._measurement_covariance(cylinders, det)
+            if covariance is None:
+                covariance = np.broadcast_to(self.config.measurement_std_m**2 * np.eye(2), (len(det), 2, 2))
+            rows, xy, fused_covariance = fuse_views(cylinders.xy[det], covariance, owner[det], len(tracks))
+            tracks.state[rows], tracks.covariance[rows] = self._kalman.update(
+                tracks.state[rows], tracks.covariance[rows], xy, measurement_covariance=fused_covariance
+            )
+            views = np.bincount(owner[det], minlength=len(tracks))[rows]
+            for column, values in ((tracks.height, cylinders.height[det]), (tracks.radius, cylinders.radius[det])):
+                mean = np.bincount(owner[det], weights=values, minlength=len(tracks))[rows] / views
+                column[rows] = smooth(column[rows], mean, weight)
+            first = np.full(len(tracks), len(cylinders), dtype=np.int64)
+            np.minimum.at(first, owner[det], det)
+            tracks.detection[rows] = first[rows]
+            hit[rows] = True
+        tracks.hits[hit] += 1
+        tracks.misses[hit] = 0
+        tracks.misses[~hit] += 1
+
+    def _birth_from_views(self, cylinders: Cylinders, leftover: BoolArray, time_s: float) -> None:
+        """Start tentative tracks where the strong views no track took, fused among themselves,
+        place someone outside the gate (``gate_chi2``) of every track that took a view now: one
+        inside is taken for a second box of that track's person. A track that took no view, whose
+        person may be the one placed, holds no birth back."""
+        if not leftover.any() or self._fuse is None:
+            return
+        fused = self._fuse(cylinders[leftover])
+        placed = np.isfinite(fused.xy).all(axis=1) & (fused.score > 0)
+        seen = self._tracks.misses == 0
+        if seen.any() and placed.any():
+            placed &= ~self._explained(fused, seen).any(axis=1)
+        before = len(self._tracks)
+        self._birth(fused, placed, time_s)
+        self._tracks.detection[before:] = -1  # born from fused views, not from one input row
+
+    def _explained(self, people: Cylinders, rows: BoolArray) -> BoolArray:
+        """(people, tracks ``rows``): whether each person lies within the gate of each track's
+        feet, under the sum of both covariances (a person without one: ``measurement_std_m``)."""
+        nominal = self.config.measurement_std_m**2 * np.eye(2)
+        own = np.broadcast_to(nominal, (len(people), 2, 2)) if people.covariance is None else people.covariance
+        known: BoolArray = np.all(np.isfinite(own), axis=(1, 2))
+        own = np.where(known[:, None, None], own, nominal)
+        joint = own[:, None] + self._tracks.covariance[None, rows, :2, :2]
+        d2 = mahalanobis2(people.xy[:, None, :] - self._tracks.state[None, rows, :2], joint)
+        chi2 = self.config.gate_chi2
+        explained: BoolArray = d2 < (chi2 if chi2 is not None else 0.0)
+        return explained
 
     def report(self, sightings: Cylinders | None = None) -> TrackTable:
         """The confirmed tracks the last update reports (see ``TrackerConfig.report_max_misses``;
@@ -563,8 +729,7 @@ class Tracker:
         new = ~tracks.confirmed & (tracks.hits >= self.config.activate_hits)
         # Ids go in order of birth, so they are reproducible for a given input.
         order = np.flatnonzero(new)
-        tracks.id[order] = self._numbering.next_id + np.arange(len(order))
-        self._numbering.next_id += len(order)
+        tracks.id[order] = [self._numbering.id_of(key) for key in tracks.key[order].tolist()]
         tracks.confirmed[new] = True
 
     def _retire(self) -> None:

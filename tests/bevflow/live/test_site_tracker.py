@@ -26,21 +26,25 @@ def site():
     return parse_site(SITE)
 
 
-def holding(site: Site, hypotheses: int) -> Site:
-    """``site`` with its tracker holding ``hypotheses`` ways of matching open."""
-    return site.model_copy(update={"thresholds": site.thresholds.model_copy(update={"track_hypotheses": hypotheses})})
+def holding(site: Site, hypotheses: int, views: bool = True) -> Site:
+    """``site`` with its tracker holding ``hypotheses`` ways of matching open, taking the views
+    itself or (``views`` False) the fused people."""
+    changes = {"track_hypotheses": hypotheses, "track_views": views}
+    return site.model_copy(update={"thresholds": site.thresholds.model_copy(update=changes)})
 
 
 def seen(*xy: tuple[float, float]) -> Cylinders:
     return Cylinders(xy=np.array(xy, dtype=np.float64).reshape(-1, 2))
 
 
+@pytest.mark.parametrize("views", [True, False], ids=["tracks take the views", "views fused first"])
 @pytest.mark.parametrize("hypotheses", [1, 5])
-def test_a_person_seen_by_two_cameras_is_one_track_seen_by_both(site, hypotheses: int) -> None:
-    tracker = SiteTracker(holding(site, hypotheses))
+def test_a_person_seen_by_two_cameras_is_one_track_seen_by_both(site, hypotheses: int, views: bool) -> None:
+    tracker = SiteTracker(holding(site, hypotheses, views))
     for k in range(4):
         step = tracker.step(T0 + k * S // 10, {"west": seen((3.0, 0.0)), "east": seen((3.1, 0.05))})
     assert [t.cameras for t in step.tracks.tracks] == [["west", "east"]]
+    assert len(step.fusion.fused) == 1  # what the tick reports of the instant, either way
     (track,) = step.tracks.tracks
     assert track.xy == pytest.approx((3.05, 0.025), abs=0.05)
     assert track.zones == ["middle"]

@@ -107,8 +107,9 @@ def test_reset_forgets_tracks_but_keeps_counting_ids() -> None:
 
 def test_the_plain_tracker_unless_hypotheses_are_asked_for() -> None:
     assert type(online_tracker(TrackerConfig())) is Tracker
-    assert type(online_tracker(TrackerConfig.from_thresholds(Thresholds(track_hypotheses=1)))) is Tracker
-    assert type(online_tracker(TrackerConfig.from_thresholds(Thresholds()))) is HypothesisTracker  # a site's default
+    assert type(online_tracker(TrackerConfig.from_thresholds(Thresholds(track_hypotheses=1, track_views=False)))) is Tracker
+    site_default = TrackerConfig.from_thresholds(Thresholds())
+    assert type(online_tracker(site_default, fuse=lambda views: views)) is HypothesisTracker
 
 
 @pytest.mark.parametrize(
