@@ -227,9 +227,10 @@ class Thresholds(_Strict):
         "(docs/RESULTS.md, CMC2). Past 2,000 tracks divided by this number (100 for 20) fewer are held, one from "
         "2,000 tracks, so that the work per update stays a few times that of deciding at once")
     track_views: bool = Field(
-        default=True, description="the tracker takes each camera's views itself, at most one per camera and person, "
-        "and fuses only the views no track took to find new people (bevflow.tracking.views); false fuses every "
-        "view first and tracks the fused people. Views held better identities in a dense room (docs/RESULTS.md, CMC2)")
+        default=False, description="true: the tracker takes each camera's views itself, at most one per camera and "
+        "person, and fuses only the views no track took to find new people (bevflow.tracking.views); false fuses "
+        "every view first and tracks the fused people. Views held identities better with four side cameras in a "
+        "dense room, and left false tracks with ceiling fisheyes and the shipped detectors (docs/RESULTS.md)")
 
 
 class BusTls(_Strict):

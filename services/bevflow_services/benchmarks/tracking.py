@@ -46,10 +46,10 @@ COVARIANCE_SOURCES = ("projector", "fusion")
 DEFAULT_HYPOTHESES: int = Thresholds.model_fields["track_hypotheses"].default  # what a site holds
 
 
-def grid_site(cameras: int, people: int, hypotheses: int = DEFAULT_HYPOTHESES, track_views: bool = True) -> Site:
+def grid_site(cameras: int, people: int, hypotheses: int = DEFAULT_HYPOTHESES, track_views: bool = False) -> Site:
     """A site of ``cameras`` fisheyes in a near-square grid, four zones (the floor's quarters)
     and a capacity of ``people``; its tracker holds ``hypotheses`` ways of matching open and
-    takes the cameras' views itself (``track_views``, a site's default) or fused people."""
+    takes fused people (a site's default) or the cameras' views itself (``track_views``)."""
     cols = math.ceil(math.sqrt(cameras))
     rows = math.ceil(cameras / cols)
     width, depth = cols * CAMERA_SPACING_M, rows * CAMERA_SPACING_M
@@ -150,11 +150,11 @@ def with_projector_covariance(site: Site, per_camera: dict[str, Cylinders]) -> d
 
 def bench_tick(people: int, cameras: int, ticks: int = 100, warmup: int = 20, seed: int = 0,
                profiler: cProfile.Profile | None = None, covariance: str = "projector", hypotheses: int = DEFAULT_HYPOTHESES,
-               track_views: bool = True) -> dict:  # fmt: skip
+               track_views: bool = False) -> dict:  # fmt: skip
     """Time ``ticks`` steps after ``warmup`` untimed ones (tracks need a few hits to confirm);
     ``profiler`` (optional) is enabled around the timed steps only. ``covariance`` says where the
     position covariances come from: "projector" (with the cylinders) or "fusion" (in the tick).
-    ``track_views`` False: the site fuses the views first (``--fuse-first``)."""
+    ``track_views``: the tracks take the cameras' views themselves (``--track-views``)."""
     if covariance not in COVARIANCE_SOURCES:
         raise ValueError(f"covariance must be one of {COVARIANCE_SOURCES}, got {covariance!r}")
     rng = np.random.default_rng(seed)
@@ -207,7 +207,7 @@ def bench_tick(people: int, cameras: int, ticks: int = 100, warmup: int = 20, se
 
 
 def bench_grid(people: list[int], cameras: list[int], ticks: int, warmup: int, seed: int = 0,
-               covariance: str = "projector", hypotheses: int = DEFAULT_HYPOTHESES, track_views: bool = True) -> list[dict]:
+               covariance: str = "projector", hypotheses: int = DEFAULT_HYPOTHESES, track_views: bool = False) -> list[dict]:
     """``bench_tick`` for every (people, cameras) pair."""
     return [bench_tick(p, c, ticks, warmup, seed, covariance=covariance, hypotheses=hypotheses, track_views=track_views)
             for c in cameras for p in people]
@@ -240,9 +240,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--hypotheses", type=int, default=DEFAULT_HYPOTHESES,
                         help=f"the site's track_hypotheses: ways of matching held open (default {DEFAULT_HYPOTHESES}, "
                         "a site's)")
-    parser.add_argument("--fuse-first", action="store_true",
-                        help="the site fuses every camera's views before tracking (track_views false), instead of the "
-                        "tracks taking the views (a site's default)")
+    parser.add_argument("--track-views", action="store_true",
+                        help="the tracks take every camera's views themselves (the site's track_views true), instead of "
+                        "following the fused people (a site's default)")
     parser.add_argument("--profile", action="store_true",
                         help="profile the timed steps of the first case (cProfile, thread CPU time) instead of timing")
     args = parser.parse_args(argv)
@@ -253,11 +253,11 @@ def main(argv: list[str] | None = None) -> None:
 
         profiler = cProfile.Profile(time.thread_time)
         bench_tick(args.people[0], args.cameras[0], args.ticks, args.warmup, profiler=profiler,
-                   covariance=args.covariance, hypotheses=args.hypotheses, track_views=not args.fuse_first)
+                   covariance=args.covariance, hypotheses=args.hypotheses, track_views=args.track_views)
         pstats.Stats(profiler).sort_stats("tottime").print_stats(30)
         return
     rows = bench_grid(args.people, args.cameras, args.ticks, args.warmup, covariance=args.covariance,
-                      hypotheses=args.hypotheses, track_views=not args.fuse_first)
+                      hypotheses=args.hypotheses, track_views=args.track_views)
     for line in format_rows(rows):
         print(line, flush=True)
 

@@ -1,8 +1,8 @@
 """One step of the site's central stage: fuse the cameras' cylinders, track, analyse.
 
-The tracks take the cameras' views themselves where the site says so (``track_views``, the
-default; ``bevflow.tracking.views``), and the fusion of the tick is then what is reported of it
-(the fused people, the sightings); otherwise they follow the fused people.
+The tracks follow the fused people, or take the cameras' views themselves where the site says so
+(``track_views``; ``bevflow.tracking.views``), and the fusion of the tick is then only what is
+reported of it (the fused people, the sightings).
 
 The tracker service calls ``SiteTracker.step`` once per tick (``bevflow.live.assembler``) and
 publishes what comes back as it is: the tracks, the occupancy and the events are wire messages.

@@ -25,11 +25,11 @@ What is reported carries ids of its own (``_PublishedIds``), given in sequence f
 as each track is first reported, so that the ids a site sees count its people, not its
 hypotheses (replaying CMC2 with 20, they confirmed 535 tracks, of which 30 were reported).
 
-Where the tracks take the cameras' views themselves (``TrackerConfig.track_views``, a site's
-default), a matching gives each track at most one view of each camera (``bevflow.tracking.views``),
-and the hypotheses differ in which view went to which track. Otherwise fusion takes the best
-hypothesis's predictions as its priors (``bevflow.live.site_tracker``): fusing once per hypothesis
-scored the same on CMC2 at many times the cost.
+Where the tracks take the cameras' views themselves (``TrackerConfig.track_views``), a matching
+gives each track at most one view of each camera (``bevflow.tracking.views``), and the hypotheses
+differ in which view went to which track. Otherwise fusion takes the best hypothesis's predictions
+as its priors (``bevflow.live.site_tracker``): fusing once per hypothesis scored the same on CMC2
+at many times the cost.
 
 On CMC2 (``docs/RESULTS.md``; four side cameras, 10 people at 4 fps) 20 hypotheses raised the
 six perturbed copies' IDF1 0.529 → 0.610 and MOTA 0.862 → 0.877 (the output decided 2 s late:

@@ -58,8 +58,8 @@ at 2 fps, where a coasting person has moved on by 0.6 m.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields, replace
 from collections.abc import Callable
+from dataclasses import dataclass, field, fields, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np

@@ -26,7 +26,7 @@ def site():
     return parse_site(SITE)
 
 
-def holding(site: Site, hypotheses: int, views: bool = True) -> Site:
+def holding(site: Site, hypotheses: int, views: bool = False) -> Site:
     """``site`` with its tracker holding ``hypotheses`` ways of matching open, taking the views
     itself or (``views`` False) the fused people."""
     changes = {"track_hypotheses": hypotheses, "track_views": views}

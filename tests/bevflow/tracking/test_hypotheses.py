@@ -107,9 +107,10 @@ def test_reset_forgets_tracks_but_keeps_counting_ids() -> None:
 
 def test_the_plain_tracker_unless_hypotheses_are_asked_for() -> None:
     assert type(online_tracker(TrackerConfig())) is Tracker
-    assert type(online_tracker(TrackerConfig.from_thresholds(Thresholds(track_hypotheses=1, track_views=False)))) is Tracker
-    site_default = TrackerConfig.from_thresholds(Thresholds())
-    assert type(online_tracker(site_default, fuse=lambda views: views)) is HypothesisTracker
+    assert type(online_tracker(TrackerConfig.from_thresholds(Thresholds(track_hypotheses=1)))) is Tracker
+    assert type(online_tracker(TrackerConfig.from_thresholds(Thresholds()))) is HypothesisTracker  # a site's default
+    views = TrackerConfig.from_thresholds(Thresholds(track_views=True))
+    assert type(online_tracker(views, fuse=lambda seen: seen)) is HypothesisTracker
 
 
 @pytest.mark.parametrize(

@@ -323,10 +323,10 @@ def test_config_rejects_bad_values(overrides: dict, message: str) -> None:
 
 
 def test_config_from_site_thresholds() -> None:
-    thresholds = Thresholds(track_activate_hits=4, track_max_misses=7, track_gate_m=2.0, track_views=False)
+    thresholds = Thresholds(track_activate_hits=4, track_max_misses=7, track_gate_m=2.0, track_views=True)
     config = TrackerConfig.from_thresholds(thresholds, weak_score=0.4)
     assert (config.activate_hits, config.max_misses, config.gate_m, config.weak_score) == (4, 7, 2.0, 0.4)
-    assert not config.track_views and TrackerConfig.from_thresholds(Thresholds()).track_views
+    assert config.track_views and not TrackerConfig.from_thresholds(Thresholds()).track_views
 
 
 # --- a crowd --------------------------------------------------------------------------------

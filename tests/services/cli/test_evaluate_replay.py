@@ -80,14 +80,14 @@ def test_hypotheses_override_the_sites_and_are_named(recording: Path, capsys: py
     assert json.loads(out.read_text())["tracker"]["hypotheses"] == 1 and "hypotheses" not in capsys.readouterr().out
 
 
-def test_fuse_first_tracks_fused_people_instead_of_views_and_says_so(recording: Path, capsys: pytest.CaptureFixture) -> None:
+def test_track_views_lets_the_tracks_take_the_views_and_says_so(recording: Path, capsys: pytest.CaptureFixture) -> None:
     out = recording / "scores.json"
-    assert main(args(recording, "--json", str(out))) == 0  # the site's default: tracks take the views
-    assert json.loads(out.read_text())["tracker"]["track_views"] is True
-    assert "each camera's views matched to the tracks" in capsys.readouterr().out
-    assert main(args(recording, "--fuse-first", "--json", str(out))) == 0
+    assert main(args(recording, "--json", str(out))) == 0  # the site's default: views fused first
     assert json.loads(out.read_text())["tracker"]["track_views"] is False
     assert "views fused before tracking" in capsys.readouterr().out
+    assert main(args(recording, "--track-views", "--json", str(out))) == 0
+    assert json.loads(out.read_text())["tracker"]["track_views"] is True
+    assert "each camera's views matched to the tracks" in capsys.readouterr().out
 
 
 def test_the_area_leaves_out_unmatched_tracks_beyond_it(recording: Path, tmp_path: Path) -> None:
