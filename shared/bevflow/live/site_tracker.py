@@ -73,14 +73,12 @@ class SiteTracker:
             # the instant (the fused people, the sightings), so it needs no priors: matching the
             # views to them again cost a dense solve a tick in a crush.
             fusion = fuse_cylinders(seen, self.cameras, self.site.thresholds.fusion_distance_m)
-        else:
-            expected = self.tracker.predicted(time_s)  # the confirmed tracks guide fusion ("Tracks as priors")
-            fusion = fuse_cylinders(seen, self.cameras, self.site.thresholds.fusion_distance_m, priors=expected)
-        if self.tracker.config.track_views:
             views = with_covariance_where_missing(seen, self.cameras)  # each view's weight in its track
             table = self.tracker.update(views, time_s, fusion.sightings)
             cameras = self._cameras_of_views(table, seen.camera)
         else:
+            expected = self.tracker.predicted(time_s)  # the confirmed tracks guide fusion ("Tracks as priors")
+            fusion = fuse_cylinders(seen, self.cameras, self.site.thresholds.fusion_distance_m, priors=expected)
             table = self.tracker.update(fusion.fused, time_s, fusion.sightings)
             seen_by = self._cameras_of_fused(fusion, seen.camera)
             cameras = [seen_by[d] if d >= 0 else [] for d in table.detection.tolist()]
