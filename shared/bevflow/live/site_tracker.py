@@ -72,8 +72,8 @@ class SiteTracker:
             # The tracks take the views themselves; the fusion is only what the step reports of
             # the instant (the fused people, the sightings), so it needs no priors: matching the
             # views to them again cost a dense solve a tick in a crush.
-            fusion = fuse_cylinders(seen, self.cameras, self.site.thresholds.fusion_distance_m)
             views = with_covariance_where_missing(seen, self.cameras)  # each view's weight in its track
+            fusion = fuse_cylinders(views, self.cameras, self.site.thresholds.fusion_distance_m)
             table = self.tracker.update(views, time_s, fusion.sightings)
             cameras = self._cameras_of_views(table, seen.camera)
         else:

@@ -566,9 +566,7 @@ class Tracker:
         det = np.flatnonzero(owner >= 0)
         hit = np.zeros(len(tracks), dtype=bool)
         if len(det):
-            covariance = self._measurement_covariance(cylinders, det)
-            if covariance is None:
-                covariance = np.broadcast_to(self.config.measurement_std_m**2 * np.eye(2), (len(det), 2, 2))
+            covariance = self._covariance_or_fixed(cylinders, det)
             rows, xy, fused_covariance = fuse_views(cylinders.xy[det], covariance, owner[det], len(tracks))
             tracks.state[rows], tracks.covariance[rows] = self._kalman.update(
                 tracks.state[rows], tracks.covariance[rows], xy, measurement_covariance=fused_covariance
@@ -675,10 +673,7 @@ class Tracker:
         their Mahalanobis distance² and ln |S| to cost them by."""
         track, det = pairs.track, pairs.det
         tracks = self._tracks
-        measurement = self._measurement_covariance(cylinders, det)
-        if measurement is None:
-            measurement = np.broadcast_to(self.config.measurement_std_m**2 * np.eye(2), (len(det), 2, 2))
-        joint = tracks.covariance[track, :2, :2] + measurement
+        joint = tracks.covariance[track, :2, :2] + self._covariance_or_fixed(cylinders, det)
         offset = cylinders.xy[det] - tracks.state[track, :2]
         size = determinant(joint)
         d2 = mahalanobis2(offset, joint, size)
@@ -713,6 +708,13 @@ class Tracker:
         tracks.hits[hit] += 1
         tracks.misses[hit] = 0
         tracks.misses[~hit] += 1
+
+    def _covariance_or_fixed(self, cylinders: Cylinders, det: IntArray) -> FloatArray:
+        """``_measurement_covariance``, or the filter's fixed ``measurement_std_m`` where it gives none."""
+        measurement = self._measurement_covariance(cylinders, det)
+        if measurement is None:
+            return np.broadcast_to(self.config.measurement_std_m**2 * np.eye(2), (len(det), 2, 2))
+        return measurement
 
     def _measurement_covariance(self, cylinders: Cylinders, det: IntArray) -> FloatArray | None:
         """Each detection's own feet covariance, where ``measurement_from_covariance`` asks for
