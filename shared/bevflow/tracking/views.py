@@ -30,10 +30,21 @@ Measured on CMC2's twelve perturbed copies (``docs/RESULTS.md``, 20 hypotheses),
 fused first IDF1 0.606, MOTA 0.878; views taken by the tracks 0.718, 0.895, with more false tracks
 and fewer misses (precision 0.959 → 0.929, recall 0.945 → 0.986). Under the paper suite's ceiling
 fisheyes the false tracks cost more: with the shipped detectors two rows failed their targets
-(seq 5's pair F1 0.976 → 0.933, seq 6 MOTA 0.903 → 0.892). Their cause is not yet known. Seq 6 has
-one camera, so it is not two cameras disagreeing. Neither letting a slot take a view within
-fusion's 0.45 m beyond the gate, nor dropping a leftover view within 0.45–0.6 m of a view its
-camera gave a track, moved either row. So a site fuses first unless it says ``track_views: true``.
+(seq 5's pair F1 0.976 → 0.933, seq 6 MOTA 0.903 → 0.892). Seq 6 has one camera, so it is not two
+cameras disagreeing; frame by frame it left 32 false and 142 missed tracks against 16 and 140
+fused first, from births going wrong both ways:
+
+- held back: a person standing 0.48 m from a tracked neighbour started no track, being inside
+  that track's gate; two frames later the neighbour's box was missed, the neighbour's track took
+  the person's box, and the neighbour came back under a new id (frames 173–179);
+- let through: after a frame with two boxes of one walking person, their feet 0.01 m apart, a
+  second track followed that person beside the first (frames 201–210).
+
+None of these changed it for the better: letting a camera's second view start a track whatever
+the gate (a camera shows a person once; seq 6 false tracks 32 → 52, CMC2 IDF1 0.731 → 0.621),
+letting a slot take a view within fusion's 0.45 m beyond the gate, or dropping a leftover view
+within 0.45–0.6 m of a view its camera gave a track. So a site fuses first unless it says
+``track_views: true``.
 
 Cost, ``bevflow bench --only tracking`` at 10 fps, once each way in one session on a 2-core AMD
 EPYC: a tick for 100 people on 4 / 16 / 64 cameras took 35 / 28 / 23 ms with views against
