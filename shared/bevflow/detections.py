@@ -152,7 +152,11 @@ class Cylinders:
 
     ``covariance`` (N, 2, 2), optional: how uncertain each feet position is, in m², when the stage
     that made the cylinders knows (the projector computes it once per detection, from its camera,
-    so fusion need not). None when nobody said; a row of NaN where that row's is unknown."""
+    so fusion need not). None when nobody said; a row of NaN where that row's is unknown.
+
+    ``stature`` (N,): the person's head height as measured from the box at the fitted feet
+    (``bevflow.stature``), NaN where the box does not measure it (the default). ``height`` is
+    the fit's, from its grid of a few heights."""
 
     xy: FloatArray
     height: FloatArray
@@ -161,6 +165,7 @@ class Cylinders:
     score: FloatArray
     occluded: NDArray[np.bool_]
     covariance: FloatArray | None
+    stature: FloatArray
 
     # Written out rather than generated, as for Boxes: any array-like in, checked arrays held.
     def __init__(
@@ -172,6 +177,7 @@ class Cylinders:
         score: ArrayLike | None = None,
         occluded: ArrayLike | None = None,
         covariance: ArrayLike | None = None,
+        stature: ArrayLike | None = None,
     ) -> None:
         rows = _rows("xy", xy, 2)
         n = len(rows)
@@ -182,6 +188,7 @@ class Cylinders:
         object.__setattr__(self, "score", _column("score", score, n, 1.0, np.float64))
         object.__setattr__(self, "occluded", _column("occluded", occluded, n, False, np.bool_))
         object.__setattr__(self, "covariance", None if covariance is None else _covariance(covariance, n))
+        object.__setattr__(self, "stature", _column("stature", stature, n, np.nan, np.float64))
 
     @classmethod
     def empty(cls) -> Cylinders:
@@ -199,6 +206,7 @@ class Cylinders:
             score=self.score[index],
             occluded=self.occluded[index],
             covariance=None if self.covariance is None else self.covariance[index].reshape(-1, 2, 2),
+            stature=self.stature[index],
         )
 
     def with_camera(self, camera: int) -> Cylinders:
@@ -233,4 +241,5 @@ class Cylinders:
             score=np.concatenate([p.score for p in parts]),
             occluded=np.concatenate([p.occluded for p in parts]),
             covariance=covariance,
+            stature=np.concatenate([p.stature for p in parts]),
         )

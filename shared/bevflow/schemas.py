@@ -91,6 +91,9 @@ class CylinderEstimate(BaseModel):
         default=None,
         description="(xx, xy, yy) covariance of the feet position, m²; absent: the receiver computes it",
     )
+    stature: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = Field(
+        default=None, description="the person's head height as the box measures it, m; absent: not measured"
+    )
 
     @model_validator(mode="after")
     def _covariance_is_positive_definite(self) -> CylinderEstimate:
@@ -101,11 +104,12 @@ class CylinderEstimate(BaseModel):
         return self
 
     @model_serializer(mode="wrap")
-    def _omit_absent_covariance(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
-        # An estimate without one serialises as before the field existed.
+    def _omit_absent_fields(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
+        # An estimate without them serialises as before the fields existed.
         out: dict[str, Any] = handler(self)
-        if self.covariance is None:
-            out.pop("covariance", None)
+        for name in ("covariance", "stature"):
+            if getattr(self, name) is None:
+                out.pop(name, None)
         return out
 
 
@@ -132,6 +136,7 @@ class CameraCylinders(Message):
             score=[e.score for e in c],
             occluded=[e.occluded for e in c],
             covariance=covariance,
+            stature=[np.nan if e.stature is None else e.stature for e in c],
         )
 
     @classmethod
@@ -156,6 +161,7 @@ class CameraCylinders(Message):
                     score=float(np.clip(cyl.score[i], 0.0, 1.0)),
                     occluded=bool(cyl.occluded[i]),
                     covariance=covariance[i],
+                    stature=float(cyl.stature[i]) if cyl.stature[i] > 0 and np.isfinite(cyl.stature[i]) else None,
                 )
                 for i in np.flatnonzero(finite)
             ],

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import inspect
 import json
+import math
 import typing
 from types import SimpleNamespace
 from typing import Any
@@ -132,6 +133,21 @@ def test_unusable_covariances_are_left_for_the_receiver() -> None:
 def test_a_covariance_that_is_not_positive_definite_is_refused(covariance) -> None:
     with pytest.raises(ValidationError):
         CylinderEstimate(xy=(0.0, 0.0), height=1.7, radius=0.3, covariance=covariance)
+
+
+def test_measured_statures_cross_the_wire_and_unmeasured_ones_stay_absent() -> None:
+    cyl = Cylinders(xy=[[1.0, 2.0], [3.0, 4.0]], stature=[1.73, NAN])
+    message = CameraCylinders.from_cylinders("cam-b", seq=1, capture_ns=99, cyl=cyl)
+    wire = json.loads(message.model_dump_json())["cylinders"]
+    assert wire[0]["stature"] == 1.73 and "stature" not in wire[1]
+    back = CameraCylinders.model_validate_json(message.model_dump_json()).to_cylinders(camera_index=0)
+    np.testing.assert_array_equal(back.stature, [1.73, NAN])
+
+
+@pytest.mark.parametrize("stature", [0.0, -1.7, NAN, math.inf])
+def test_a_stature_that_is_not_a_height_is_refused(stature: float) -> None:
+    with pytest.raises(ValidationError):
+        CylinderEstimate(xy=(0.0, 0.0), height=1.7, radius=0.3, stature=stature)
 
 
 # --- events -------------------------------------------------------------------------------------

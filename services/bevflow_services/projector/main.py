@@ -5,7 +5,8 @@
 Subscribes to every camera's detections of the site and publishes one ``CameraCylinders`` per
 detections message. The fit is the paper's 3D cylinder estimation (``bevflow.cylinder``); its
 per-camera lookup tables are built on a camera's first message. Each cylinder carries the
-covariance of its feet position. The work itself is ``bevflow.live.projection.CameraProjection``,
+covariance of its feet position and, where its box measures it, the person's head height
+(``bevflow.stature``). The work itself is ``bevflow.live.projection.CameraProjection``,
 which a replay of recorded boxes runs too. Messages from cameras the site does not know are
 counted and skipped, never fatal. Under overload the oldest detections are
 dropped (counted), so what is published stays current.

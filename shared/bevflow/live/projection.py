@@ -6,16 +6,20 @@ live. Per camera it keeps the paper's cylinder-fit lookup table (``bevflow.cylin
 only as far out as a reported person's box can land (``fit_reach_m``); it drops the cylinders
 beyond the camera's reporting radius (its monitored radius plus a margin, where its feet
 estimates are still good enough to fuse); and it gives each cylinder the covariance of its feet
-position (``bevflow.fusion.position_covariance``), which needs the camera and so is computed
-here rather than in the tracker, which fuses every camera in one thread.
+position (``bevflow.fusion.position_covariance``) and the person's head height as the box
+measures it (``bevflow.stature``), which need the camera and the box and so are computed here
+rather than in the tracker, which fuses every camera in one thread.
 """
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 from bevflow.cylinder import CylinderGrid, ProjectionMethod, fit_cylinders
 from bevflow.detections import Boxes, Cylinders
 from bevflow.fusion import with_position_covariance
 from bevflow.site import Site
+from bevflow.stature import measure_stature
 
 # Each camera's lookup table fills in wherever its boxes' anchors land, 24 kB per m² of floor,
 # and keeps what it filled. With the fit's default reach of 100 m a table could grow to 930 MB;
@@ -51,5 +55,6 @@ class CameraProjection:
         index = self.site.camera_index(camera_id)
         camera = self._cameras[index]
         cylinders = fit_cylinders(camera, boxes, self.method, self._grids[index], camera_index=index)
+        cylinders = replace(cylinders, stature=measure_stature(camera, boxes, cylinders))
         cylinders = cylinders[cylinders.near(camera.center, self.site.cameras[index].reporting_radius_m)]
         return with_position_covariance(cylinders, self._cameras)

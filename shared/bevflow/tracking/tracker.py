@@ -70,7 +70,15 @@ from bevflow.matrix2 import determinant, mahalanobis2
 from bevflow.metrics.matching import assign_edges, gated_pairs
 from bevflow.metrics.ranked_matching import RankingMemo, ranked_matchings
 from bevflow.tracking.kalman import ConstantVelocityKalman, smooth
-from bevflow.tracking.views import TENTATIVE_COST, fuse_views, leftover_cost, slot_rows
+from bevflow.tracking.views import (
+    STATURE_DRIFT_M,
+    TENTATIVE_COST,
+    fuse_views,
+    fused_stature,
+    leftover_cost,
+    slot_rows,
+    stature_cost,
+)
 
 if TYPE_CHECKING:  # the tracker reads a site's thresholds but needs no site to run
     from bevflow.site import Thresholds
@@ -259,6 +267,8 @@ class _Tracks:
     detection: IntArray = field(default_factory=lambda: np.zeros(0, np.int64))
     confirmed: BoolArray = field(default_factory=lambda: np.zeros(0, bool))
     key: IntArray = field(default_factory=lambda: np.zeros(0, np.int64))
+    stature: FloatArray = field(default_factory=lambda: np.zeros(0))  # head height (views), NaN unknown
+    stature_variance: FloatArray = field(default_factory=lambda: np.zeros(0))
 
     def __len__(self) -> int:
         return len(self.id)
@@ -457,7 +467,9 @@ class Tracker:
             raise ValueError("TrackerConfig.track_views takes each camera's views (camera >= 0), not fused detections")
         n_cameras = int(cylinders.camera.max()) + 1 if len(cylinders) else 1
         tentative = np.where(self._tracks.confirmed[pairs.track], 0.0, TENTATIVE_COST)
-        cost = pairs.d2 + pairs.log_det + tentative
+        tracks = self._tracks
+        height = stature_cost(cylinders.stature[pairs.det], tracks.stature[pairs.track], tracks.stature_variance[pairs.track])
+        cost = pairs.d2 + pairs.log_det + tentative + height
         usable = candidates.strong | candidates.weak
         keep = usable[pairs.det] & (cost < 2.0 * leftover_cost(chi2))
         rows = slot_rows(pairs.track[keep], cylinders.camera[pairs.det[keep]], n_cameras)
@@ -575,6 +587,9 @@ class Tracker:
             for column, values in ((tracks.height, cylinders.height[det]), (tracks.radius, cylinders.radius[det])):
                 mean = np.bincount(owner[det], weights=values, minlength=len(tracks))[rows] / views
                 column[rows] = smooth(column[rows], mean, weight)
+            tracks.stature, tracks.stature_variance = fused_stature(
+                tracks.stature, tracks.stature_variance, cylinders.stature[det], owner[det]
+            )
             first = np.full(len(tracks), len(cylinders), dtype=np.int64)
             np.minimum.at(first, owner[det], det)
             tracks.detection[rows] = first[rows]
@@ -628,6 +643,7 @@ class Tracker:
         tracks = self._tracks
         if len(tracks):
             tracks.state, tracks.covariance = self._kalman.predict(tracks.state, tracks.covariance, dt)
+            tracks.stature_variance = tracks.stature_variance + STATURE_DRIFT_M**2 * dt
         tracks.detection = np.full(len(tracks), -1, dtype=np.int64)
         return dt
 
@@ -753,6 +769,7 @@ class Tracker:
             radius=cylinders.radius[det].copy(), hits=hits, misses=np.zeros(n, np.int64),
             born_s=np.full(n, time_s), detection=det.astype(np.int64), confirmed=np.zeros(n, bool),
             key=self._numbering.next_key + np.arange(n, dtype=np.int64),
+            stature=np.full(n, np.nan), stature_variance=np.full(n, np.inf),
         )  # fmt: skip
         self._numbering.next_key += n
         self._tracks = self._tracks.append(born)

@@ -49,3 +49,20 @@ def test_the_projection_is_the_cylinder_fit_where_nothing_is_cut() -> None:
 def test_a_camera_the_site_lacks_is_an_error_naming_its_cameras() -> None:
     with pytest.raises(ValueError, match="no camera 'zz'; its cameras are a, b"):
         CameraProjection(parse_site(SITE)).project("zz", Boxes.empty())
+
+
+SIDE_SITE = """
+site: corridor
+cameras:
+  - {id: s, model: pinhole, image_size: [1920, 1080], intrinsics: {fx: 1700, fy: 1700, cx: 960, cy: 540},
+     pose: {position: [0, 0, 2.5], pitch_deg: 70}}
+"""
+
+
+def test_a_side_camera_measures_each_persons_head_height() -> None:
+    site = parse_site(SIDE_SITE)
+    camera = site.camera("s")
+    heights = (1.60, 1.85)
+    boxes = Boxes(xyxy=np.array([box_around(camera, (0.4 * k, 5.0), h) for k, h in enumerate(heights)]))
+    cylinders = CameraProjection(site).project("s", boxes)
+    np.testing.assert_allclose(cylinders.stature, heights, atol=0.08)
