@@ -26,6 +26,7 @@ from bevflow.detections import Boxes, Cylinders
 from bevflow.fusion import PositionNoise
 
 FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
 
 HEIGHTS_M = (1.0, 2.2)
 """The head heights tried, m: a measurement at either end is out of range and dropped."""
@@ -49,35 +50,49 @@ def measure_stature(camera: Camera, boxes: Boxes, cylinders: Cylinders,
         raise ValueError(f"{len(boxes)} boxes but {len(cylinders)} cylinders: they go row for row")
     stature = np.full(len(cylinders), np.nan)
     rows = np.flatnonzero((cylinders.score > 0) & ~cylinders.occluded & np.isfinite(cylinders.xy).all(axis=1))
+    axis, edge, usable = _head_edges(camera, boxes.xyxy[rows], cylinders.xy[rows], box_fraction, max_std_m)
+    rows, axis, edge = rows[usable], axis[usable], edge[usable]  # only these are searched
     if not len(rows):
         return stature
-    xy, n = cylinders.xy[rows], len(rows)
-    probe = _head_image(camera, xy, np.array([[PROBE_M - 0.01, PROBE_M + 0.01]] * n))
+    best = _search(camera, cylinders.xy[rows], axis, edge)
+    low, high = HEIGHTS_M
+    inside = (best > low + 1e-9) & (best < high - 1e-9)
+    stature[rows[inside]] = np.round(best[inside], 2)
+    return stature
+
+
+def _head_edges(camera: Camera, xyxy: FloatArray, xy: FloatArray, box_fraction: float,
+                max_std_m: float) -> tuple[IntArray, FloatArray, NDArray[np.bool_]]:  # fmt: skip
+    """For each box and its feet: the image axis the head moves along, the box edge it moves
+    towards, and whether that edge can measure it (the motion clear and fast enough)."""
+    n = len(xy)
+    probe = _head_image(camera, xy, np.tile([PROBE_M - 0.01, PROBE_M + 0.01], (n, 1)))
     motion = (probe[:, 1] - probe[:, 0]) / 0.02  # px per metre of height
     axis = np.argmax(np.abs(motion), axis=1)
     along = np.abs(motion[np.arange(n), axis])
-    with np.errstate(invalid="ignore"):
-        clear = along >= AXIS_SHARE * np.linalg.norm(motion, axis=1)
     # The edge the head moves towards: top (y0) when it rises in the image, and so on.
-    xyxy = boxes.xyxy[rows]
     rising = motion[np.arange(n), axis] < 0
     edge = np.where(rising, xyxy[np.arange(n), axis], xyxy[np.arange(n), axis + 2])
     extent = xyxy[np.arange(n), axis + 2] - xyxy[np.arange(n), axis]
     with np.errstate(divide="ignore", invalid="ignore"):
+        clear = along >= AXIS_SHARE * np.linalg.norm(motion, axis=1)
         precise = box_fraction * extent / along <= max_std_m
+    return axis, edge, clear & precise
+
+
+def _search(camera: Camera, xy: FloatArray, axis: IntArray, edge: FloatArray) -> FloatArray:
+    """The height in ``HEIGHTS_M`` whose image above each feet lies nearest its edge, found in
+    ``STEPS_M``."""
+    n = len(xy)
     low, high = HEIGHTS_M
-    best = np.full(n, (low + high) / 2)
-    span = high - low
+    best, span = np.full(n, (low + high) / 2), high - low
     for step in STEPS_M:
         heights = np.clip(best[:, None] + np.arange(-span / 2, span / 2 + step / 2, step)[None], low, high)
         image = _head_image(camera, xy, heights)[np.arange(n), :, axis]  # (n, heights): along the axis
         with np.errstate(invalid="ignore"):
             miss = np.where(np.isfinite(image), np.abs(image - edge[:, None]), np.inf)
         best, span = heights[np.arange(n), np.argmin(miss, axis=1)], 2 * step
-    inside = (best > low + 1e-9) & (best < high - 1e-9)
-    ok = clear & precise & inside
-    stature[rows[ok]] = np.round(best[ok], 2)
-    return stature
+    return best
 
 
 def _head_image(camera: Camera, xy: FloatArray, heights: FloatArray) -> FloatArray:

@@ -466,8 +466,8 @@ class Tracker:
         if len(cylinders) and cylinders.camera.min() < 0:
             raise ValueError("TrackerConfig.track_views takes each camera's views (camera >= 0), not fused detections")
         n_cameras = int(cylinders.camera.max()) + 1 if len(cylinders) else 1
-        tentative = np.where(self._tracks.confirmed[pairs.track], 0.0, TENTATIVE_COST)
         tracks = self._tracks
+        tentative = np.where(tracks.confirmed[pairs.track], 0.0, TENTATIVE_COST)
         height = stature_cost(cylinders.stature[pairs.det], tracks.stature[pairs.track], tracks.stature_variance[pairs.track])
         cost = pairs.d2 + pairs.log_det + tentative + height
         usable = candidates.strong | candidates.weak
