@@ -553,7 +553,8 @@ def _merge(
     rows: Cylinders, person: IntArray, n_people: int, info: FloatArray, with_covariance: bool
 ) -> tuple[Cylinders, IntArray]:
     """One row per person: feet by information-weighted mean (``info``: (N, 2, 2) per row, zero for
-    rows that must not move it), height and radius weighted by √det(info). ``with_covariance``:
+    rows that must not move it), height and radius weighted by √det(info), head height
+    (``stature``) the mean of the rows that measured one. ``with_covariance``:
     the fused feet carry their covariance, the inverse of the summed information (``info`` is
     then the rows' inverse covariances, not the paper rule's stand-in weights)."""
     n_views = np.bincount(person, minlength=n_people).astype(np.int64)
@@ -589,5 +590,16 @@ def _merge(
         score=score,
         occluded=~visible,
         covariance=covariance if with_covariance else None,
+        stature=_mean_measured(rows.stature, person, n_people),
     )
     return fused, n_views
+
+
+def _mean_measured(values: FloatArray, person: IntArray, n_people: int) -> FloatArray:
+    """Per person, the mean of their rows' finite ``values``; NaN where none is."""
+    measured = np.isfinite(values)
+    count = np.bincount(person[measured], minlength=n_people)
+    total = np.bincount(person[measured], weights=values[measured], minlength=n_people)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean: FloatArray = np.where(count > 0, total / np.maximum(count, 1), np.nan)
+    return mean

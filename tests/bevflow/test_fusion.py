@@ -267,6 +267,16 @@ def test_a_person_is_occluded_only_if_every_view_was(occluded, expected):
     assert fusion.fused.occluded.tolist() == [expected]
 
 
+@pytest.mark.parametrize(
+    "stature, expected",
+    [([1.60, 1.70], 1.65), ([np.nan, 1.70], 1.70), ([np.nan, np.nan], np.nan)],
+    ids=["both measured", "one measured", "neither"],
+)
+def test_a_persons_head_height_is_the_mean_of_their_views_that_measured_it(stature, expected):
+    fusion = fuse_cylinders(Cylinders(xy=[[2.0, 0.0], [2.1, 0.0]], camera=[0, 1], stature=stature), TWO)
+    np.testing.assert_allclose(fusion.fused.stature, [expected])
+
+
 def test_people_are_numbered_in_order_of_arrival():
     fusion = fuse_cylinders(Cylinders(xy=[[9.0, 9.0], [2.0, 0.0], [5.0, 5.0], [2.1, 0.0]], camera=[0, 0, 1, 1]), TWO)
     assert fusion.assignment.tolist() == [0, 1, 2, 1]

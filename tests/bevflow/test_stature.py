@@ -34,10 +34,11 @@ def test_people_of_different_heights_measure_apart() -> None:
     assert np.all(np.diff(measured) > 0.1)
 
 
-@pytest.mark.parametrize(("radius", "why"), [(0.3, "below the camera the head hides in the box"),
-                                             (1.5, "the head moves diagonally across the box")])
-def test_a_ceiling_fisheye_measures_nothing_where_its_boxes_cannot_tell(radius: float, why: str) -> None:
-    x, y = radius * np.cos(0.7), radius * np.sin(0.7)
+@pytest.mark.parametrize(("radius", "bearing", "why"), [(0.3, 0.7, "below the camera the head hides in the box"),
+                                                        (1.5, 0.7, "the head moves diagonally across the box"),
+                                                        (3.0, 0.0, "the head is seen from 28° above")])
+def test_a_ceiling_fisheye_measures_nothing_where_its_boxes_cannot_tell(radius: float, bearing: float, why: str) -> None:
+    x, y = radius * np.cos(bearing), radius * np.sin(bearing)
     boxes = Boxes([cuboid_box(CEILING, x, y, 1.7, 0.25)])
     assert np.isnan(measure_stature(CEILING, boxes, fit_cylinders(CEILING, boxes))).all(), why
 

@@ -45,6 +45,7 @@ from bevflow.fusion import PositionNoise, fuse_cylinders
 from bevflow.metrics.detection import DetectionScores, score_detections
 from bevflow.metrics.matching import match_positions
 from bevflow.sim.noise import DetectorNoise, NoisyBoxes, apply_detector_noise, view_rng
+from bevflow.stature import with_stature
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -255,7 +256,7 @@ def evaluate_detection(
             if clip_to_image:
                 noisy, clipped = clip_boxes_to_image(noisy, camera.image_size)
             boxes = noisy.boxes.distinct()
-            cylinders = fit_cylinders(camera, boxes, method=method, grid=grid).with_camera(i)
+            cylinders = with_stature(camera, boxes, fit_cylinders(camera, boxes, method=method, grid=grid).with_camera(i), method)
             placed: NDArray[np.bool_] = np.all(np.isfinite(cylinders.xy), axis=1)
             weak = placed & (cylinders.score <= 0)
             inside = dataset.area.contains(cylinders.xy)

@@ -85,6 +85,7 @@ from bevflow.metrics.matching import match_positions
 from bevflow.metrics.tracking import TrackingScores, score_tracking
 from bevflow.schemas import CameraCylinders
 from bevflow.sim.noise import DetectorNoise, apply_detector_noise, view_rng
+from bevflow.stature import with_stature
 from bevflow.sim.presets import TABLE1, Preset, table1_sequence
 from bevflow.sim.scene import Scene
 from bevflow.sim.views import CameraRig, CameraView, GroundTruthTracks
@@ -265,7 +266,7 @@ def detect(
             real = source >= 0
             truths[c].append(view.feet_xy[source[real]])
             for m in methods:
-                fit = fit_cylinders(camera, boxes, m, camera_index=c)
+                fit = with_stature(camera, boxes, fit_cylinders(camera, boxes, m, camera_index=c), m)
                 # Through the projector's wire message, as live: unplaceable rows are dropped there.
                 wire = CameraCylinders.from_cylinders(site.camera_ids[c], k, sequence.time_ns[k], fit)
                 cylinders[m][k].append(wire.to_cylinders(c))

@@ -13,13 +13,11 @@ rather than in the tracker, which fuses every camera in one thread.
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 from bevflow.cylinder import CylinderGrid, ProjectionMethod, fit_cylinders
 from bevflow.detections import Boxes, Cylinders
 from bevflow.fusion import with_position_covariance
 from bevflow.site import Site
-from bevflow.stature import measure_stature
+from bevflow.stature import with_stature
 
 # Each camera's lookup table fills in wherever its boxes' anchors land, 24 kB per m² of floor,
 # and keeps what it filled. With the fit's default reach of 100 m a table could grow to 930 MB;
@@ -55,6 +53,6 @@ class CameraProjection:
         index = self.site.camera_index(camera_id)
         camera = self._cameras[index]
         cylinders = fit_cylinders(camera, boxes, self.method, self._grids[index], camera_index=index)
-        cylinders = replace(cylinders, stature=measure_stature(camera, boxes, cylinders))
+        cylinders = with_stature(camera, boxes, cylinders, self.method)
         cylinders = cylinders[cylinders.near(camera.center, self.site.cameras[index].reporting_radius_m)]
         return with_position_covariance(cylinders, self._cameras)

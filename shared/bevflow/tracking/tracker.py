@@ -27,7 +27,8 @@ detection's). By distance alone a vague detection beside a person (one camera's 
 them, placed 0.5 m deep along its line of sight) takes their track from their own precise one by
 lying nearer; ln |S| prefers the precise pair. On CMC2's six perturbed copies (docs/RESULTS.md)
 IDF1 0.474 → 0.529, HOTA 0.466 → 0.509 and MOTA 0.858 → 0.862; the Mahalanobis distance² alone
-lost (IDF1 0.465). Each pass is solved exactly by ``bevflow.metrics.matching.assign_edges``: only
+lost (IDF1 0.465). Where a detection and a track both know the person's head height, the
+pair's cost also weighs it (``bevflow.tracking.stature``). Each pass is solved exactly by ``bevflow.metrics.matching.assign_edges``: only
 pairs within the gate are considered (found with a k-d tree), a pair with no rival is matched
 outright and the contested rest goes to one sparse assignment solve, minimising the total cost
 plus the largest cost a gated pair could have (``gate``, or χ² plus the spread of ln |S|) for
@@ -70,15 +71,8 @@ from bevflow.matrix2 import determinant, mahalanobis2
 from bevflow.metrics.matching import assign_edges, gated_pairs
 from bevflow.metrics.ranked_matching import RankingMemo, ranked_matchings
 from bevflow.tracking.kalman import ConstantVelocityKalman, smooth
-from bevflow.tracking.views import (
-    STATURE_DRIFT_M,
-    TENTATIVE_COST,
-    fuse_views,
-    fused_stature,
-    leftover_cost,
-    slot_rows,
-    stature_cost,
-)
+from bevflow.tracking.stature import STATURE_DRIFT_M, fused_stature, stature_cost
+from bevflow.tracking.views import TENTATIVE_COST, fuse_views, leftover_cost, slot_rows
 
 if TYPE_CHECKING:  # the tracker reads a site's thresholds but needs no site to run
     from bevflow.site import Thresholds
@@ -267,7 +261,7 @@ class _Tracks:
     detection: IntArray = field(default_factory=lambda: np.zeros(0, np.int64))
     confirmed: BoolArray = field(default_factory=lambda: np.zeros(0, bool))
     key: IntArray = field(default_factory=lambda: np.zeros(0, np.int64))
-    stature: FloatArray = field(default_factory=lambda: np.zeros(0))  # head height (views), NaN unknown
+    stature: FloatArray = field(default_factory=lambda: np.zeros(0))  # head height, NaN unknown
     stature_variance: FloatArray = field(default_factory=lambda: np.zeros(0))
 
     def __len__(self) -> int:
@@ -293,8 +287,9 @@ class _Tracks:
 @dataclass(frozen=True)
 class _Candidates:
     """(track, detection) pairs one association pass may match, with their feet distance ``dist``
-    (each pass's gate). Under the uncertainty gate also each pair's Mahalanobis distance² ``d2``
-    and ln |S| of its innovation covariance (``log_det``), and that gate's χ² (``chi2``)."""
+    (each pass's gate). Under the uncertainty gate also each pair's Mahalanobis distance² ``d2``,
+    ln |S| of its innovation covariance (``log_det``), what the detection's head height adds
+    (``height``, ``bevflow.tracking.stature``) and that gate's χ² (``chi2``)."""
 
     track: IntArray
     det: IntArray
@@ -302,15 +297,17 @@ class _Candidates:
     d2: FloatArray | None = None
     log_det: FloatArray | None = None
     chi2: float = 0.0
+    height: FloatArray | None = None
 
     def cost(self, allowed: BoolArray, gate: float) -> tuple[FloatArray, float]:
         """The ``allowed`` pairs' costs and the worst cost a pair within the gate could have: the
         feet distance and ``gate``, or the negative log-likelihood d² + ln |S| (less the least
-        ln |S|, so that no choice hangs on the unit of length) and χ² plus the spread of ln |S|."""
-        if self.d2 is None or self.log_det is None:
+        ln |S|, so that no choice hangs on the unit of length) plus the height's term, and χ² plus
+        the spread of ln |S|."""
+        if self.d2 is None or self.log_det is None or self.height is None:
             return self.dist[allowed], gate
         log_det = self.log_det[allowed] - self.log_det[allowed].min()
-        return self.d2[allowed] + log_det, self.chi2 + float(log_det.max())
+        return self.d2[allowed] + log_det + self.height[allowed], self.chi2 + float(log_det.max())
 
 
 @dataclass(frozen=True, eq=False)
@@ -461,15 +458,14 @@ class Tracker:
         """With ``track_views``: the (slot, view) pairs worth making and their costs, and how many
         cameras the slots are cut for (``bevflow.tracking.views``)."""
         pairs = candidates.pairs
-        if pairs.d2 is None or pairs.log_det is None:
+        if pairs.d2 is None or pairs.log_det is None or pairs.height is None:
             raise ValueError("views are matched by the pairs' likelihoods (the uncertainty gate)")
         if len(cylinders) and cylinders.camera.min() < 0:
             raise ValueError("TrackerConfig.track_views takes each camera's views (camera >= 0), not fused detections")
         n_cameras = int(cylinders.camera.max()) + 1 if len(cylinders) else 1
         tracks = self._tracks
         tentative = np.where(tracks.confirmed[pairs.track], 0.0, TENTATIVE_COST)
-        height = stature_cost(cylinders.stature[pairs.det], tracks.stature[pairs.track], tracks.stature_variance[pairs.track])
-        cost = pairs.d2 + pairs.log_det + tentative + height
+        cost = pairs.d2 + pairs.log_det + pairs.height + tentative
         usable = candidates.strong | candidates.weak
         keep = usable[pairs.det] & (cost < 2.0 * leftover_cost(chi2))
         rows = slot_rows(pairs.track[keep], cylinders.camera[pairs.det[keep]], n_cameras)
@@ -495,11 +491,11 @@ class Tracker:
                  memo: RankingMemo | None) -> list[Choice]:  # fmt: skip
         """``branch``'s ranked matchings, for tracks already moved to the update's time."""
         strong, pairs = candidates.strong, candidates.pairs
-        if pairs.d2 is None or pairs.log_det is None:
+        if pairs.d2 is None or pairs.log_det is None or pairs.height is None:
             raise ValueError("ranked choices need the pairs' likelihoods (the uncertainty gate)")
         confirmed = self._tracks.confirmed
         leftover = 0.5 * (chi2 + 4.0 * math.log(self.config.measurement_std_m))
-        cost = pairs.d2 + pairs.log_det
+        cost = pairs.d2 + pairs.log_det + pairs.height
         allowed = confirmed[pairs.track] & strong[pairs.det] & (pairs.dist <= self.config.gate_m)
         allowed &= cost < 2.0 * leftover
         track, det, cost = pairs.track[allowed], pairs.det[allowed], cost[allowed]
@@ -695,7 +691,9 @@ class Tracker:
         d2 = mahalanobis2(offset, joint, size)
         log_det = np.log(size)
         keep = d2 < chi2
-        return _Candidates(track[keep], det[keep], pairs.dist[keep], d2[keep], log_det[keep], chi2)
+        track, det = track[keep], det[keep]
+        height = stature_cost(cylinders.stature[det], tracks.stature[track], tracks.stature_variance[track])
+        return _Candidates(track, det, pairs.dist[keep], d2[keep], log_det[keep], chi2, height)
 
     def _associate(self, pairs: _Candidates, track_ok: BoolArray, det_ok: BoolArray, gate: float) -> None:
         """Match candidate tracks to candidate detections among ``pairs`` within ``gate`` (feet
@@ -721,6 +719,9 @@ class Tracker:
             )
             tracks.height[hit] = smooth(tracks.height[hit], cylinders.height[det], weight)
             tracks.radius[hit] = smooth(tracks.radius[hit], cylinders.radius[det], weight)
+            tracks.stature, tracks.stature_variance = fused_stature(
+                tracks.stature, tracks.stature_variance, cylinders.stature[det], np.flatnonzero(hit)
+            )
         tracks.hits[hit] += 1
         tracks.misses[hit] = 0
         tracks.misses[~hit] += 1

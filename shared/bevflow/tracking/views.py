@@ -25,11 +25,9 @@ views (the projector's cylinders, each with its feet covariance) go to the track
   already followed starts nobody. A fixed distance instead (0.6 m, as good on CMC2) held back
   the track of someone 0.5 m from a neighbour under a ceiling camera, whose views are precise: the
   paper suite's short run of sequence 3 lost MOTA 0.894 → 0.833.
-- **Heights.** A view whose box measured the person's head height (``Cylinders.stature``,
-  ``bevflow.stature``) adds to its pair's cost the log-likelihood ratio of that height given the
-  track's against given anyone's, at most ``STATURE_COST_CAP`` (``stature_cost``); each track
-  keeps its height from the views it took (``fused_stature``). Two people passing each other at
-  0.2 m are told apart by a tenth of a metre of height where their motion says nothing.
+- **Heights.** A view whose box measured the person's head height weighs it in each pair it may
+  make, as fused people do in the other mode (``bevflow.tracking.stature``); each track keeps
+  its height from the views it took.
 
 Measured on CMC2's twelve perturbed copies (``docs/RESULTS.md``, 20 hypotheses), online: views
 fused first IDF1 0.606, MOTA 0.878; views taken by the tracks 0.718, 0.895, with more false tracks
@@ -78,50 +76,6 @@ LEFTOVER_LOG_DET = -3.0
 (``leftover_cost``): about 0.47 m per axis, wider than the filter's own noise because a side
 camera's view is long along its line of sight. In a first version of this mode, −5 and −1 scored
 alike on CMC2's copies (IDF1 0.720 and 0.709 against 0.697)."""
-
-
-STATURE_STD_M = 0.05
-"""One view's error in a person's head height (``Cylinders.stature``): CMC2's people, one at a
-time, spread 0.02–0.14 m between quartiles. At 0.08 m the cue gained a third as much."""
-
-STATURE_DRIFT_M = 0.02
-"""How much a track's head height may drift in a second (m/√s): people stoop, sit and stand."""
-
-ANYONE_STATURE_M = (1.70, 0.08)
-"""Mean and spread of anyone's head height, m: what a view's height is weighed against."""
-
-STATURE_COST_CAP = 2.0
-"""The most a height that does not fit may add to a pair's cost. Uncapped, the cue cost CMC2's
-copies 0.013 MOTA: a height read off a box cut short can break a right pair. Capped at 2 (or
-0.5) it kept MOTA and gained more IDF1 (36 copies: 0.032 against 0.022)."""
-
-
-def stature_cost(view: FloatArray, track: FloatArray, track_variance: FloatArray) -> FloatArray:
-    """What a view's head height adds to its pair with a track: the negative log-likelihood ratio
-    of that height given the track's against given anyone's, at most ``STATURE_COST_CAP``; 0
-    where either height is unknown (NaN), so a track yet unmeasured is neither helped nor hurt."""
-    mean, spread = ANYONE_STATURE_M
-    pair = STATURE_STD_M**2 + track_variance
-    anyone = STATURE_STD_M**2 + spread**2
-    with np.errstate(invalid="ignore", divide="ignore"):
-        ratio = (view - track) ** 2 / pair + np.log(pair / anyone) - (view - mean) ** 2 / anyone
-    return np.where(np.isfinite(ratio), np.minimum(ratio, STATURE_COST_CAP), 0.0)
-
-
-def fused_stature(track: FloatArray, track_variance: FloatArray, view: FloatArray, owner: IntArray) -> tuple[FloatArray, FloatArray]:
-    """Each track's head height (NaN: unknown, variance inf) updated with the measured heights of
-    the views it took (``owner``: each view's track row; NaN views measure nothing)."""
-    measured = np.isfinite(view)
-    count = np.bincount(owner[measured], minlength=len(track)).astype(np.float64)
-    total = np.bincount(owner[measured], weights=view[measured], minlength=len(track))
-    known = np.isfinite(track)
-    prior = np.where(known, 1.0 / track_variance, 0.0)
-    information = prior + count / STATURE_STD_M**2
-    hit = count > 0
-    stature, variance = track.copy(), track_variance.copy()
-    stature[hit] = (np.where(known, track * prior, 0.0)[hit] + total[hit] / STATURE_STD_M**2) / information[hit]
-    variance[hit] = 1.0 / information[hit]
-    return stature, variance
 
 
 def leftover_cost(gate_chi2: float) -> float:
