@@ -49,8 +49,9 @@ MAX_DEPRESSION_DEG = 20.0
 """The steepest a camera may look down at a head (at ``PROBE_M``) and still measure it. CMC2's
 side cameras see every head they measure within 16° of level; the paper suite's ceiling cameras
 see theirs from 20–82° above, and measuring those cost its rows with the shipped detectors
-(seq 6 MOTA 0.903 → 0.894, F1 0.955 → 0.949; MOTA lower on 13 of 17 rows, higher on one by 0.002):
-a detector's box of a person seen from above ends where the head meets it less often."""
+(seq 6 MOTA 0.903 → 0.894, F1 0.955 → 0.949; MOTA lower on 13 of 17 rows, higher on one by
+0.002). Why was not traced; presumably a detector's box of someone seen from above ends at their
+head less reliably than a side view's top edge."""
 
 
 def measure_stature(camera: Camera, boxes: Boxes, cylinders: Cylinders,
@@ -76,7 +77,8 @@ def with_stature(camera: Camera, boxes: Boxes, cylinders: Cylinders, method: Pro
     """``cylinders`` placed by ``method`` from ``boxes`` (row for row), with their head heights
     measured where that method fitted the feet (the cylinder fit), as the projector gives them.
     The paper's baselines place the feet at a box point, under a fisheye often 0.2 m off, which
-    reads a wrong height: on the paper suite's short runs they lost up to 0.16 MOTA with heights."""
+    reads a wrong height: measured before ``MAX_DEPRESSION_DEG`` left ceiling views out, their
+    rows of the paper suite's short runs lost up to 0.16 MOTA."""
     if method != "cylinder":
         return cylinders
     return replace(cylinders, stature=measure_stature(camera, boxes, cylinders))

@@ -25,6 +25,7 @@ from scipy.optimize import linear_sum_assignment
 from bevflow.detect.runtime import RENDER_TRAINED_RANGES, Detector, DetectorBank
 from bevflow.detect.window import Window, detection_window, scaled_window
 from bevflow.detections import Boxes
+from bevflow.evaluation.detector import iou_matrix
 from bevflow.sim.render import FisheyeRenderer, Room
 from bevflow.sim.render_textures import Appearance, RenderStyle
 from bevflow.sim.scene import SceneConfig, SceneFrame
@@ -90,22 +91,11 @@ def attribute(boxes: Boxes, view: CameraView) -> IntArray:
     source = np.full(len(boxes), -1, dtype=np.int64)
     if not len(boxes) or not len(view):
         return source
-    iou = box_iou(boxes.xyxy, view.boxes.xyxy)
+    iou = iou_matrix(boxes.xyxy, view.boxes.xyxy)
     rows, cols = linear_sum_assignment(-iou)
     good = iou[rows, cols] >= MATCH_IOU
     source[rows[good]] = cols[good]
     return source
-
-
-def box_iou(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
-    """(A, 4) × (B, 4) xyxy boxes → (A, B) intersection over union."""
-    lo = np.maximum(a[:, None, :2], b[None, :, :2])
-    hi = np.minimum(a[:, None, 2:], b[None, :, 2:])
-    inter = np.clip(hi - lo, 0.0, None).prod(-1)
-    area_a = np.clip(a[:, 2:] - a[:, :2], 0.0, None).prod(-1)
-    area_b = np.clip(b[:, 2:] - b[:, :2], 0.0, None).prod(-1)
-    union = area_a[:, None] + area_b[None] - inter
-    return np.where(union > 0, inter / np.where(union > 0, union, 1.0), 0.0)
 
 
 def _scaled_model(bank: DetectorBank, height_m: float) -> Detector:

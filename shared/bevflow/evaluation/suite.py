@@ -85,10 +85,10 @@ from bevflow.metrics.matching import match_positions
 from bevflow.metrics.tracking import TrackingScores, score_tracking
 from bevflow.schemas import CameraCylinders
 from bevflow.sim.noise import DetectorNoise, apply_detector_noise, view_rng
-from bevflow.stature import with_stature
 from bevflow.sim.presets import TABLE1, Preset, table1_sequence
 from bevflow.sim.scene import Scene
 from bevflow.sim.views import CameraRig, CameraView, GroundTruthTracks
+from bevflow.stature import with_stature
 
 IntArray = NDArray[np.int64]
 FloatArray = NDArray[np.float64]

@@ -18,7 +18,8 @@ FAR = [100.0, 100.0, 110.0, 110.0]
 
 @pytest.mark.parametrize(
     ("a", "b", "expected"),
-    [(A, A, 1.0), (A, B, 0.0), (A, [5.0, 0.0, 15.0, 10.0], 1 / 3), (A, [0.0, 0.0, 5.0, 10.0], 0.5)],
+    [(A, A, 1.0), (A, B, 0.0), (A, [5.0, 0.0, 15.0, 10.0], 1 / 3), (A, [0.0, 0.0, 5.0, 10.0], 0.5),
+     (A, [2.0, 2.0, 4.0, 4.0], 4 / 100)],
 )
 def test_iou(a, b, expected) -> None:  # noqa: ANN001
     assert iou_matrix(np.array([a]), np.array([b]))[0, 0] == pytest.approx(expected)

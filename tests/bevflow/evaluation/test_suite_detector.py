@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from bevflow.detections import Boxes
-from bevflow.evaluation.rendered import MATCH_IOU, attribute, box_iou
+from bevflow.evaluation.rendered import MATCH_IOU, attribute
 from bevflow.evaluation.suite import SuiteResult, paper_presets, run_suite, simulate
 from bevflow.sim.views import CameraView
 from bevflow_services.cli import main
@@ -21,19 +21,6 @@ def view_of(xyxy: list[list[float]]) -> CameraView:
     n = len(xyxy)
     boxes = Boxes(xyxy=np.asarray(xyxy, dtype=np.float64).reshape(-1, 4))
     return CameraView(0, boxes, np.arange(10, 10 + n), np.ones(n), np.zeros(n, bool), np.zeros((n, 2)))
-
-
-@pytest.mark.parametrize(
-    ("a", "b", "expected"),
-    [
-        ([0, 0, 10, 10], [0, 0, 10, 10], 1.0),
-        ([0, 0, 10, 10], [5, 0, 15, 10], 50 / 150),
-        ([0, 0, 10, 10], [20, 20, 30, 30], 0.0),
-        ([0, 0, 10, 10], [2, 2, 4, 4], 4 / 100),
-    ],
-)
-def test_box_iou(a: list[float], b: list[float], expected: float) -> None:
-    assert box_iou(np.array([a], float), np.array([b], float))[0, 0] == pytest.approx(expected)
 
 
 @pytest.mark.parametrize(
