@@ -61,7 +61,8 @@ def measure_stature(camera: Camera, boxes: Boxes, cylinders: Cylinders,
     if len(boxes) != len(cylinders):
         raise ValueError(f"{len(boxes)} boxes but {len(cylinders)} cylinders: they go row for row")
     stature = np.full(len(cylinders), np.nan)
-    rows = np.flatnonzero((cylinders.score > 0) & ~cylinders.occluded & np.isfinite(cylinders.xy).all(axis=1))
+    fitted = (cylinders.score > 0) & ~cylinders.occluded & np.isfinite(cylinders.xy).all(axis=1)
+    rows = np.flatnonzero(fitted & _seen_from_near_level(camera, cylinders.xy))
     axis, edge, usable = _head_edges(camera, boxes.xyxy[rows], cylinders.xy[rows], box_fraction, max_std_m)
     rows, axis, edge = rows[usable], axis[usable], edge[usable]  # only these are searched
     if not len(rows):
@@ -87,8 +88,7 @@ def with_stature(camera: Camera, boxes: Boxes, cylinders: Cylinders, method: Pro
 def _head_edges(camera: Camera, xyxy: FloatArray, xy: FloatArray, box_fraction: float,
                 max_std_m: float) -> tuple[IntArray, FloatArray, NDArray[np.bool_]]:  # fmt: skip
     """For each box and its feet: the image axis the head moves along, the box edge it moves
-    towards, and whether that edge can measure it (the motion clear and fast enough, the head
-    seen from near level)."""
+    towards, and whether that edge can measure it (the motion clear and fast enough)."""
     n = len(xy)
     probe = _head_image(camera, xy, np.tile([PROBE_M - 0.01, PROBE_M + 0.01], (n, 1)))
     motion = (probe[:, 1] - probe[:, 0]) / 0.02  # px per metre of height
@@ -101,9 +101,17 @@ def _head_edges(camera: Camera, xyxy: FloatArray, xy: FloatArray, box_fraction: 
     with np.errstate(divide="ignore", invalid="ignore"):
         clear = along >= AXIS_SHARE * np.linalg.norm(motion, axis=1)
         precise = box_fraction * extent / along <= max_std_m
+    return axis, edge, clear & precise
+
+
+def _seen_from_near_level(camera: Camera, xy: FloatArray) -> NDArray[np.bool_]:
+    """Whether the camera looks down at a head at ``PROBE_M`` above each feet by at most
+    ``MAX_DEPRESSION_DEG``: tested first, so a ceiling camera projects nothing."""
     centre = camera.center
-    depression = np.degrees(np.arctan2(centre[2] - PROBE_M, np.linalg.norm(xy - centre[:2], axis=1)))
-    return axis, edge, clear & precise & (depression <= MAX_DEPRESSION_DEG)
+    with np.errstate(invalid="ignore"):
+        depression = np.degrees(np.arctan2(centre[2] - PROBE_M, np.linalg.norm(xy - centre[:2], axis=1)))
+        level: NDArray[np.bool_] = depression <= MAX_DEPRESSION_DEG
+    return level
 
 
 def _search(camera: Camera, xy: FloatArray, axis: IntArray, edge: FloatArray) -> FloatArray:

@@ -256,7 +256,8 @@ def evaluate_detection(
             if clip_to_image:
                 noisy, clipped = clip_boxes_to_image(noisy, camera.image_size)
             boxes = noisy.boxes.distinct()
-            cylinders = with_stature(camera, boxes, fit_cylinders(camera, boxes, method=method, grid=grid).with_camera(i), method)
+            cylinders = fit_cylinders(camera, boxes, method=method, grid=grid).with_camera(i)
+            cylinders = with_stature(camera, boxes, cylinders, method)
             placed: NDArray[np.bool_] = np.all(np.isfinite(cylinders.xy), axis=1)
             weak = placed & (cylinders.score <= 0)
             inside = dataset.area.contains(cylinders.xy)

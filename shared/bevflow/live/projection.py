@@ -53,6 +53,6 @@ class CameraProjection:
         index = self.site.camera_index(camera_id)
         camera = self._cameras[index]
         cylinders = fit_cylinders(camera, boxes, self.method, self._grids[index], camera_index=index)
-        cylinders = with_stature(camera, boxes, cylinders, self.method)
-        cylinders = cylinders[cylinders.near(camera.center, self.site.cameras[index].reporting_radius_m)]
+        near = cylinders.near(camera.center, self.site.cameras[index].reporting_radius_m)
+        cylinders = with_stature(camera, boxes[near], cylinders[near], self.method)
         return with_position_covariance(cylinders, self._cameras)

@@ -44,6 +44,8 @@ def stature_cost(view: FloatArray, track: FloatArray, track_variance: FloatArray
     """What a view's head height adds to its pair with a track: the negative log-likelihood ratio
     of that height given the track's against given anyone's, at most ``STATURE_COST_CAP``; 0
     where either height is unknown (NaN), so a track yet unmeasured is neither helped nor hurt."""
+    if not np.isfinite(view).any():  # a site whose cameras measure no height (ceilings)
+        return np.zeros(np.broadcast(view, track, track_variance).shape)
     mean, spread = ANYONE_STATURE_M
     pair = STATURE_STD_M**2 + track_variance
     anyone = STATURE_STD_M**2 + spread**2

@@ -28,12 +28,13 @@ them, placed 0.5 m deep along its line of sight) takes their track from their ow
 lying nearer; ln |S| prefers the precise pair. On CMC2's six perturbed copies (docs/RESULTS.md)
 IDF1 0.474 → 0.529, HOTA 0.466 → 0.509 and MOTA 0.858 → 0.862; the Mahalanobis distance² alone
 lost (IDF1 0.465). Where a detection and a track both know the person's head height, the
-pair's cost also weighs it (``bevflow.tracking.stature``). Each pass is solved exactly by ``bevflow.metrics.matching.assign_edges``: only
-pairs within the gate are considered (found with a k-d tree), a pair with no rival is matched
-outright and the contested rest goes to one sparse assignment solve, minimising the total cost
-plus the largest cost a gated pair could have (``gate``, or χ² plus the spread of ln |S|) for
-every track and detection left over. 1,000 people therefore cost about 3 ms per update rather
-than a dense 1,000 × 1,000 Hungarian solve.
+pair's cost also weighs it (``bevflow.tracking.stature``). Each pass is solved exactly by
+``bevflow.metrics.matching.assign_edges``: only pairs within the gate are considered (found
+with a k-d tree), a pair with no rival is matched outright and the contested rest goes to one
+sparse assignment solve, minimising the total cost plus the largest cost a gated pair could
+have (``gate``, or χ² plus the spread of ln |S|) for every track and detection left over.
+1,000 people therefore cost about 3 ms per update rather than a dense 1,000 × 1,000 Hungarian
+solve.
 
 Reported tracks: ``update`` returns the confirmed tracks matched in this update, and those
 coasting (missed) for at most ``report_max_misses`` consecutive updates, at their predicted
@@ -463,8 +464,7 @@ class Tracker:
         if len(cylinders) and cylinders.camera.min() < 0:
             raise ValueError("TrackerConfig.track_views takes each camera's views (camera >= 0), not fused detections")
         n_cameras = int(cylinders.camera.max()) + 1 if len(cylinders) else 1
-        tracks = self._tracks
-        tentative = np.where(tracks.confirmed[pairs.track], 0.0, TENTATIVE_COST)
+        tentative = np.where(self._tracks.confirmed[pairs.track], 0.0, TENTATIVE_COST)
         cost = pairs.d2 + pairs.log_det + pairs.height + tentative
         usable = candidates.strong | candidates.weak
         keep = usable[pairs.det] & (cost < 2.0 * leftover_cost(chi2))
