@@ -13,7 +13,15 @@ from scipy.sparse.csgraph import connected_components
 
 from bevflow.camera import FisheyeCamera, PinholeCamera, rotation_from_ypr
 from bevflow.detections import Cylinders
-from bevflow.fusion import PositionNoise, _components, fuse_cylinders, position_covariance, with_position_covariance
+from bevflow.fusion import (
+    CROSSED_CUT_VIEWS_SCORE,
+    PositionNoise,
+    _components,
+    fuse_cylinders,
+    position_covariance,
+    with_position_covariance,
+)
+from bevflow.tracking.tracker import TrackerConfig
 
 PAPER = {"noise": None}  # the paper's rule: feet closer than 0.45 m
 DEFAULT: dict = {}
@@ -294,7 +302,8 @@ def test_a_weak_view_confirms_a_person_but_does_not_move_them(mode):
 
 @pytest.mark.parametrize("mode", BOTH)
 def test_weak_views_alone_are_no_one(mode):
-    xy = [[9.0, 9.0], [2.0, 0.0], [2.1, 0.0], [5.0, 5.0]]
+    # (6.0, 0) and (6.1, 0): both cameras see them looking along +X, so they do not cross
+    xy = [[9.0, 9.0], [6.0, 0.0], [6.1, 0.0], [5.0, 5.0]]
     seen = Cylinders(xy=xy, camera=[0, 0, 1, 1], score=[0.0, 0.0, 0.0, 0.7])
     fusion = fuse_cylinders(seen, TWO, **mode)
     assert fusion.assignment.tolist() == [-1, -1, -1, 0]
@@ -313,6 +322,46 @@ def test_a_sighting_is_uncertain_along_its_line_of_sight_only():
     fit = position_covariance(seen[:1], CROSSED, noise)[0]
     np.testing.assert_allclose(sighting.covariance[0], fit + np.diag([0.0, 4.0]), atol=1e-12)
     assert len(fuse_cylinders(seen[1:], CROSSED).sightings) == 0
+
+
+# --- cut views that cross ---------------------------------------------------------------------------
+# CROSSED's cameras see (0, 10) at right angles; SAME_WAY's two both look along +Y, 16° apart there.
+SAME_WAY = [side_view((0.0, 0.0, 2.5), 0.0), side_view((3.0, 0.0, 2.5), 0.0)]
+
+
+@pytest.mark.parametrize(
+    "cameras, xy, options, person",
+    [
+        (CROSSED, [[0.0, 10.0], [0.1, 10.1]], {}, True),
+        (CROSSED, [[0.0, 10.0], [0.1, 10.1]], {"crossing_deg": 80.0}, True),
+        (CROSSED, [[0.0, 10.0], [0.1, 10.1]], {"crossing_deg": 100.0}, False),  # 90° is not enough
+        (CROSSED, [[0.0, 10.0], [0.1, 10.1]], {"crossing_deg": math.inf}, False),
+        (CROSSED, [[0.0, 10.0], [0.1, 10.1]], PAPER, False),
+        (CROSSED, [[0.0, 10.5], [0.0, 10.0]], {}, False),  # one group under the gate, 0.5 m apart
+        (SAME_WAY, [[0.0, 10.0], [0.1, 10.0]], {}, False),  # both too far the same way: no proof
+    ],
+    ids=["crossed", "80 degrees", "100 degrees", "off", "paper", "too far apart", "same way"],
+)
+def test_cut_views_whose_lines_of_sight_cross_place_a_person(cameras, xy, options, person):
+    fusion = fuse_cylinders(Cylinders(xy=xy, camera=[0, 1], score=[0.0, 0.0]), cameras, **options)
+    assert fusion.assignment.tolist() == ([0, 0] if person else [-1, -1])
+    assert len(fusion.sightings) == (0 if person else 2)
+    if person:
+        np.testing.assert_allclose(fusion.fused.xy[0], [0.05, 10.05], atol=0.1)
+        # strong enough for the tracker to start a track from them
+        assert fusion.fused.score.tolist() == [CROSSED_CUT_VIEWS_SCORE]
+        assert CROSSED_CUT_VIEWS_SCORE >= TrackerConfig().weak_score
+
+
+def test_a_strong_view_keeps_its_score_beside_cut_views_that_cross():
+    seen = Cylinders(xy=[[0.0, 10.0], [0.1, 10.1], [0.05, 9.95]], camera=[0, 1, 2], score=[0.0, 0.0, 0.9])
+    fusion = fuse_cylinders(seen, [*CROSSED, side_view((-4.0, 10.0, 2.5), -90.0)])
+    assert fusion.assignment.tolist() == [0, 0, 0] and fusion.fused.score.tolist() == [0.9]
+
+
+def test_crossing_needs_a_positive_angle():
+    with pytest.raises(ValueError, match="crossing_deg"):
+        fuse_cylinders(Cylinders.empty(), CROSSED, crossing_deg=0.0)
 
 
 # --- hidden views the occlusion test missed ---------------------------------------------------------
@@ -520,10 +569,10 @@ def test_priors_group_the_views_of_the_people_expected(xy, camera, score, priors
 
 
 def test_a_weak_view_on_a_prior_moves_the_person_and_is_not_a_sighting():
-    seen = Cylinders(xy=[[2.0, 0.0], [2.2, 0.0]], camera=[0, 1], score=[0.0, 0.0])
-    fusion = fuse_cylinders(seen, THREE, priors=_priors((2.1, 0.0)))
+    seen = Cylinders(xy=[[6.0, 0.0], [6.2, 0.0]], camera=[0, 1], score=[0.0, 0.0])  # seen the same way
+    fusion = fuse_cylinders(seen, THREE, priors=_priors((6.1, 0.0)))
     assert len(fusion.sightings) == 0
-    np.testing.assert_allclose(fusion.fused.xy, [[2.1, 0.0]], atol=0.05)
+    np.testing.assert_allclose(fusion.fused.xy, [[6.1, 0.0]], atol=0.05)
     assert fusion.fused.score.tolist() == [0.0]  # still weak: the tracker only continues tracks with it
 
 
