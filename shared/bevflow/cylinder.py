@@ -51,9 +51,11 @@ Choices the paper leaves open, and why:
   probably cut (its bottom edge is the top of a nearer person, not the feet), and its whole-box fit
   is then a smaller, farther person, often tens of metres off (WILDTRACK: median 20 m). The fit is
   kept (``occluded`` False) with **score 0**, which ``bevflow.fusion`` reads as *weak*: it may
-  confirm another camera's view of that person but never makes a person on its own. Dropping it
-  outright would cost more where the test is a false alarm: a side view cannot tell a cut box from
-  a shorter, farther person, and on tight silhouette boxes the test fires on some uncut people.
+  confirm another camera's view of that person but never makes a person on its own (only with
+  another camera's weak view seen from across: ``bevflow.fusion``, "Cut views that cross").
+  Dropping it outright would cost more where the test is a false alarm: a side view cannot tell a
+  cut box from a shorter, farther person, and on tight silhouette boxes the test fires on some
+  uncut people.
   Only on such shallow views, a second cue lowers the test's threshold to
   ``touching_occlusion_ratio`` (0: the fit sticks out at all): the box's feet end lies inside, or
   within ``touch_fraction`` of its length of, the box of a person whose feet are nearer the camera

@@ -50,29 +50,28 @@ distance error, and leaving it out measured slightly better. ``score`` is the be
 ``occluded`` holds only when every view was occluded.
 
 **Weak views.** A cylinder with score ≤ 0 is *weak*: ``bevflow.cylinder`` gives that to a box whose
-lower body looks hidden where its feet cannot be rebuilt from the head (a side-view camera), so
-its floor position may be metres off. A weak view still joins a group (it confirms another
-camera's view of the person) but does not move the fused position, and a group of weak views only
-is not a person (unless they cross, below, or a track vouches for them, "Tracks as priors"): its
-inputs get assignment −1. Those views are kept as *sightings*: a camera saw
-part of someone there and could not place them, which tells the tracker that a person it misses
-may still be standing behind someone (``bevflow.tracking.tracker``, ``coast_needs_sighting``).
-A sighting's covariance is its fit's plus ``weak_along_m`` along its camera's line of sight: its
-bearing is as good as any view's, its range is not.
+lower body looks hidden where its feet cannot be rebuilt from the head (a side-view camera), so its
+floor position may be metres off. A weak view still joins a group (it confirms another camera's view
+of the person) but does not move the fused position, and a group of weak views only is not a person
+(unless they cross, below, or a track vouches for them, "Tracks as priors"): its inputs get
+assignment −1. Those views are kept as *sightings*: a camera saw part of someone there and could not
+place them, which tells the tracker that a person it misses may still be standing behind someone
+(``bevflow.tracking.tracker``, ``coast_needs_sighting``). A sighting's covariance is its fit's plus
+``weak_along_m`` along its camera's line of sight: its bearing is as good as any view's, its range
+is not.
 
-**Cut views that cross.** A cut box places its person too far along its own camera's line of
-sight, so two cameras looking the same way can agree on a point where nobody stands, but two whose
-lines of sight cross at ``crossing_deg`` (45°) or more agree only near where the person stands. A group
-of weak views only, of two or more cameras, every two within ``distance_m`` of each other, two of
-whose lines of sight cross at that angle, is therefore a person, placed by their mean (weighted as
-any group's), with score ``CROSSED_CUT_VIEWS_SCORE``: one the tracker may start a track from. In
-a crowd seen from the side many boxes are cut (CMC2: four cameras 2.15 m up around a small room,
-up to 10 people): there 211 of the 214 people so placed stood within 0.5 m of someone
-(``docs/RESULTS.md``, CMC2). Where any two cameras' weak views agreeing under the gate made a
-person, none of the 77 so made on WILDTRACK's replayed boxes (2 % jitter) stood within 0.5 m of
-anyone, and 53 of them were seen from less than 15° apart; with both rules 2 are left there, and
-the per-frame evaluation gains one false positive in 200 frames. Off with ``noise=None`` (the
-paper's rule).
+**Cut views that cross.** A cut box places its person too far along its own camera's line of sight,
+so two cameras looking the same way can agree on a point where nobody stands, but two whose lines of
+sight cross at ``crossing_deg`` (45°) or more agree only near where the person stands. A group of
+weak views only, of two or more cameras, every two within ``distance_m`` of each other, two of whose
+lines of sight cross at that angle, is therefore a person, placed by their mean (weighted as any
+group's), with score ``CROSSED_CUT_VIEWS_SCORE``: one the tracker may start a track from. In a crowd
+seen from the side many boxes are cut (CMC2: four cameras 2.15 m up around a small room, up to 10
+people): there 211 of the 214 people so placed stood within 0.5 m of someone (``docs/RESULTS.md``,
+CMC2). Where any two cameras' weak views agreeing under the gate made a person, none of the 77 so
+made on WILDTRACK's replayed boxes (2 % jitter) stood within 0.5 m of anyone, and 53 of them were
+seen from less than 15° apart; with both rules 2 are left there, and the per-frame evaluation gains
+one false positive in 200 frames. Off with ``noise=None`` (the paper's rule).
 
 **Hidden views the occlusion test missed.** On a shallow view a box cut by a nearer person can
 escape both occlusion tests (``bevflow.cylinder``); its fit is then a strong single view placed
@@ -159,9 +158,9 @@ class Fusion:
     """``fused``: one row per person, ``camera`` the single camera that saw them or −1 when fused
     from several. ``assignment`` (len(input),): the fused row of each input cylinder, −1 for inputs
     dropped (non-finite feet, or in a group of weak views only that is no one: module docstring,
-    "Weak views"). ``n_views`` (len(fused),): how many
-    cameras saw each person. ``sightings``: the weak views in no person's group, each with its
-    bearing covariance (module docstring, "Weak views")."""
+    "Weak views"). ``n_views`` (len(fused),): how many cameras saw each person. ``sightings``: the
+    weak views in no person's group, each with its bearing covariance (module docstring, "Weak
+    views")."""
 
     fused: Cylinders
     assignment: IntArray
