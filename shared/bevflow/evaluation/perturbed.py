@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from bevflow.datasets.mot import CameraRecording, DetectionRecording, WorldTruth
+from bevflow.datasets.mot import MIN_CONFIDENCE, CameraRecording, DetectionRecording, WorldTruth
 from bevflow.detections import Boxes
 from bevflow.evaluation.replay import EVERYWHERE, SCORED, ReplayEvaluation, replay_tracking
 from bevflow.evaluation.detection import Area
@@ -87,7 +87,7 @@ def perturbed_replays(
     runs: int,
     perturbation: BoxPerturbation = BoxPerturbation(),
     area: Area = EVERYWHERE,
-    min_confidence: float = 0.0,
+    min_confidence: float = MIN_CONFIDENCE,
     tracker: TrackerConfig | None = None,
 ) -> PerturbedReplays:
     """Replay ``runs`` perturbed copies of ``recording`` as ``replay_tracking`` replays the

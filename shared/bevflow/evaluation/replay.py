@@ -2,10 +2,10 @@
 
 A user checks bevflow against their own detector, or a public dataset, with each camera's boxes
 in files (``bevflow.datasets.mot``) and the people's floor positions. Frame by frame, each
-camera's boxes (confidence at least ``min_confidence``) go through the projector's work
-(``bevflow.live.projection``) and then one step of the tracker service's work
-(``bevflow.live.site_tracker.SiteTracker``: fusion, the one tracker, analytics), so what is
-scored is what runs live. Frame f is captured at f / fps seconds, and every frame number from the
+camera's boxes (confidence at least ``min_confidence``, by default ``MIN_CONFIDENCE`` as for the
+command) go through the projector's work (``bevflow.live.projection``) and then one step of the
+tracker service's work (``bevflow.live.site_tracker.SiteTracker``: fusion, the one tracker,
+analytics), so what is scored is what runs live. Frame f is captured at f / fps seconds, and every frame number from the
 first in the files to the last annotated one is a step, boxes or not (a frame nobody detected
 anything in is still time passing for the tracker); frames from the first to the last annotated
 one are scored, a frame without truth rows as one with nobody in it.
@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from bevflow.datasets.mot import DetectionRecording, WorldTruth, check_no_long_gap
+from bevflow.datasets.mot import MIN_CONFIDENCE, DetectionRecording, WorldTruth, check_no_long_gap
 from bevflow.detections import Cylinders
 from bevflow.evaluation.camera_errors import CameraError, CameraErrorSamples
 from bevflow.evaluation.detection import Area, scored_estimates
@@ -118,7 +118,7 @@ def replay_tracking(
     truth: WorldTruth,
     fps: float,
     area: Area = EVERYWHERE,
-    min_confidence: float = 0.0,
+    min_confidence: float = MIN_CONFIDENCE,
     tracker: TrackerConfig | None = None,
     threshold_m: float = 0.5,
 ) -> ReplayEvaluation:

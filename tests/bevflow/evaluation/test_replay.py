@@ -82,6 +82,7 @@ def test_weak_boxes_are_left_out_and_frames_without_boxes_are_scored(tmp_path: P
     assert everything.detection.tp == one_camera.detection.tp == 3 * 8  # the other camera sees everyone
     assert one_camera.detection.APE > everything.detection.APE  # but alone places them less well
     assert replay(tmp_path, tracker=WILDTRACK_TRACKER, min_confidence=0.2).detection == everything.detection
+    assert replay(tmp_path, tracker=WILDTRACK_TRACKER).detection == one_camera.detection  # the command's 0.5
     # nobody seen in frames 0 and 1: still scored, as misses
     for name in ("CVLab1", "CVLab2"):
         path = tmp_path / "detections" / f"{name}.txt"
