@@ -1,14 +1,14 @@
 """Tracking accuracy of recorded detector output, replayed through the live pipeline.
 
-A user checks bevflow against their own detector, or a public dataset, with each camera's boxes
-in files (``bevflow.datasets.mot``) and the people's floor positions. Frame by frame, each
-camera's boxes (confidence at least ``min_confidence``, by default ``MIN_CONFIDENCE`` as for the
-command) go through the projector's work (``bevflow.live.projection``) and then one step of the
-tracker service's work (``bevflow.live.site_tracker.SiteTracker``: fusion, the one tracker,
-analytics), so what is scored is what runs live. Frame f is captured at f / fps seconds, and every frame number from the
-first in the files to the last annotated one is a step, boxes or not (a frame nobody detected
-anything in is still time passing for the tracker); frames from the first to the last annotated
-one are scored, a frame without truth rows as one with nobody in it.
+A user checks bevflow against their own detector, or a public dataset, with each camera's boxes in
+files (``bevflow.datasets.mot``) and the people's floor positions. Frame by frame, each camera's
+boxes (confidence at least ``min_confidence``, by default ``MIN_CONFIDENCE`` as for the command) go
+through the projector's work (``bevflow.live.projection``) and then one step of the tracker
+service's work (``bevflow.live.site_tracker.SiteTracker``: fusion, the one tracker, analytics), so
+what is scored is what runs live. Frame f is captured at f / fps seconds, and every frame number
+from the first in the files to the last annotated one is a step, boxes or not (a frame nobody
+detected anything in is still time passing for the tracker); frames from the first to the last
+annotated one are scored, a frame without truth rows as one with nobody in it.
 
 Scores (matched within ``threshold_m`` on the floor):
 
