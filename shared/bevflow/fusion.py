@@ -255,14 +255,22 @@ def _cut_views_crossing(
     candidates = np.flatnonzero(weak_only & (sizes >= 2))  # a group holds one view per camera
     if not len(candidates):
         return crossed
-    sight = rows.xy - _camera_centres(cameras, rows.camera)[:, :2]
+    # The candidates' rows sorted by group; a group's every pair is (i, i + k) for some offset k
+    # below its size, so the pairs of all groups are taken together, offset by offset.
+    member = np.flatnonzero(np.isin(labels, candidates))
+    member = member[np.argsort(labels[member], kind="stable")]
+    group, xy = labels[member], rows.xy[member]
+    sight = xy - _camera_centres(cameras, rows.camera[member])[:, :2]
     sight /= np.maximum(np.linalg.norm(sight, axis=1, keepdims=True), 1e-12)
     widest_cosine = math.cos(math.radians(min(crossing_deg, 180.0)))
-    for group in candidates:
-        members = np.flatnonzero(labels == group)
-        xy, along = rows.xy[members], sight[members]
-        close = np.linalg.norm(xy[:, None, :] - xy[None, :, :], axis=2).max() < distance_m
-        crossed[group] = close and bool((along @ along.T).min() <= widest_cosine)
+    apart = np.zeros(len(weak_only), dtype=bool)  # some two views farther than distance_m
+    across = np.zeros(len(weak_only), dtype=bool)  # some two lines of sight crossing widely enough
+    for k in range(1, int(sizes[candidates].max())):
+        i = np.flatnonzero(group[:-k] == group[k:])
+        j = i + k
+        apart[group[i[np.linalg.norm(xy[i] - xy[j], axis=1) >= distance_m]]] = True
+        across[group[i[np.einsum("ij,ij->i", sight[i], sight[j]) <= widest_cosine]]] = True
+    crossed[candidates] = across[candidates] & ~apart[candidates]
     return crossed
 
 
