@@ -3,8 +3,9 @@ pipeline (``bevflow.evaluation.replay``) and scored against world truth.
 
 Prints and writes (``--json OUT``) ``MODA``, ``MOTA``, ``IDF1``, ``HOTA``, ``DetA``, ``AssA``,
 ``IDSW``, ``precision``, ``recall``, ``APE``, ``frames`` of the online tracks as top-level keys,
-then ``detection_MODA`` (each frame's fused cylinders before tracking) and every score of the
-online, settled and fused output under ``tracked``, ``settled`` and ``detection``. With
+then ``detection_MODA`` (each frame's fused cylinders before tracking), every score of the
+online, settled and fused output under ``tracked``, ``settled`` and ``detection``, and where the
+online tracks lose identities under ``identities`` (``bevflow.evaluation.identities``). With
 ``--perturb N``, also each headline score's mean, min and max over N perturbed copies of the
 recording (``bevflow.evaluation.perturbed``) under ``perturbed``. With ``--ideal-noise M``, also
 the tracker alone on the truth moved by M metres (``bevflow.evaluation.ideal``) under ``ideal``.
@@ -23,6 +24,7 @@ from bevflow.datasets.mot import MIN_CONFIDENCE, RecordingError, read_detections
 from bevflow.datasets.wildtrack import FloorArea
 from bevflow.evaluation.camera_errors import CameraError
 from bevflow.evaluation.ideal import ideal_tracking
+from bevflow.evaluation.identities import FLICKER_FRAMES, SHORT_FRAMES, IdentityBreakdown
 from bevflow.evaluation.perturbed import BoxPerturbation, PerturbedReplays, perturbed_replays
 from bevflow.evaluation.replay import SCORED, Everywhere, ReplayEvaluation, replay_tracking
 from bevflow.evaluation.spread import Spread
@@ -179,7 +181,18 @@ def format_replay(r: ReplayEvaluation, site: Site) -> str:
     late = "one update late" if c.hypotheses == 1 else f"as decided {c.hypothesis_window_s:g} s later, then one update late"
     rows.append(f"online: the tracks as the live tracker publishes them; settled: {late}; "
                 "fused: each frame's fused detections before tracking")
-    return "\n".join(rows + format_camera_errors(r.cameras))
+    return "\n".join([*rows, format_identities(r.identities), *format_camera_errors(r.cameras)])
+
+
+def format_identities(b: IdentityBreakdown) -> str:
+    """Where the online tracks lose identities, in one sentence (``bevflow.evaluation.identities``)."""
+    def pct(count: int) -> str:
+        return f"{100 * b.share(count):.1f} %"
+
+    return (f"identities: of {b.person_frames} person-frames, {pct(b.main)} under each person's main id, {pct(b.unmatched)} "
+            f"followed by no track; under another id {pct(b.flicker)} for 1-{FLICKER_FRAMES} frames, {pct(b.short)} for "
+            f"{FLICKER_FRAMES + 1}-{SHORT_FRAMES}, {pct(b.long_fresh + b.long_taken)} for longer ({pct(b.long_fresh)} a track "
+            f"that followed nobody else before, {pct(b.long_taken)} one that had followed someone else)")
 
 
 def format_camera_errors(cameras: tuple[CameraError, ...]) -> list[str]:

@@ -18,7 +18,9 @@ Scores (matched within ``threshold_m`` on the floor):
   what several hypotheses (``bevflow.tracking.hypotheses``) decided a window later where the site
   holds them;
 - ``detection``: each frame's fused cylinders on their own, before tracking;
-- ``cameras``: each camera's own views against the truth (``bevflow.evaluation.camera_errors``).
+- ``cameras``: each camera's own views against the truth (``bevflow.evaluation.camera_errors``);
+- ``identities``: each person's frames by the online track that followed them, where identities
+  are lost (``bevflow.evaluation.identities``).
 
 Area: the tracker sees everything, but estimates outside ``area`` that match nobody are neither
 right nor wrong (``scored_estimates``, as for WILDTRACK): nobody outside it is annotated.
@@ -36,6 +38,7 @@ from bevflow.datasets.mot import MIN_CONFIDENCE, DetectionRecording, WorldTruth,
 from bevflow.detections import Cylinders
 from bevflow.evaluation.camera_errors import CameraError, CameraErrorSamples
 from bevflow.evaluation.detection import Area, scored_estimates
+from bevflow.evaluation.identities import IdentityBreakdown, identity_breakdown
 from bevflow.live.projection import CameraProjection
 from bevflow.live.site_tracker import SiteTracker
 from bevflow.metrics.detection import DetectionScores, score_detections
@@ -83,6 +86,7 @@ class ReplayEvaluation:
     settled: TrackingScores
     settled_hota: HotaScores
     detection: DetectionScores  # each frame's fused cylinders, before tracking
+    identities: IdentityBreakdown  # each person's frames by the online track that followed them
     cameras: tuple[CameraError, ...] = ()  # each camera's views against the truth, in site order
     tracks: tuple[tuple[int, TrackTable], ...] = field(default=(), repr=False, compare=False)
     """(frame number, online tracks) for every replayed frame, inside the area or not."""
@@ -93,8 +97,8 @@ class ReplayEvaluation:
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready: ``HEADLINE`` as top-level keys, then every score of the online tracks under
-        ``tracked``, the settled ones under ``settled`` and the fused detections' under
-        ``detection``."""
+        ``tracked``, the settled ones under ``settled``, the fused detections' under ``detection``
+        and where identities are lost under ``identities``."""
         out: dict[str, Any] = self.headline()
         out.update({
             "detection_MODA": self.detection.MODA,
@@ -102,6 +106,7 @@ class ReplayEvaluation:
             "settled": {**self.settled.as_dict(), **self.settled_hota.as_dict()},
             "detection": self.detection.as_dict(),
             "cameras": [c.as_dict() for c in self.cameras],
+            "identities": self.identities.as_dict(),
             "fps": self.fps,
             "min_confidence": self.min_confidence,
             "threshold_m": self.threshold_m,
@@ -185,6 +190,7 @@ class _Run:
             scores=score_tracking(self.gt, online, self.threshold_m), hota=score_hota(self.gt, online),
             settled=score_tracking(self.gt, late, self.threshold_m), settled_hota=score_hota(self.gt, late),
             detection=score_detections([g[1] for g in self.gt], self.fused, self.threshold_m),
+            identities=identity_breakdown(self.gt, online, self.threshold_m),
             tracks=tuple(self.tracks),
         )
 

@@ -34,6 +34,11 @@ def test_replay_prints_and_writes_the_scores_and_the_tracks(recording: Path, cap
     assert {int(r[0]) for r in rows} <= set(range(8)) and all(len(r) == 4 for r in rows)
     printed = capsys.readouterr().out
     assert "HOTA" in printed and "settled" in printed and "confidence >= 0.5" in printed
+    identities = result["identities"]
+    assert identities["person_frames"] == expected.scores.n_gt == sum(p["frames"] for p in identities["people"])
+    assert identities["main"] + identities["unmatched"] <= identities["person_frames"]
+    assert identities["unmatched"] <= expected.scores.fn  # the most pairs within 0.5 m: no more misses than CLEAR-MOT
+    assert f"identities: of {identities['person_frames']} person-frames, " in printed
 
 
 def test_perturbed_copies_print_and_write_the_spread_of_each_score(recording: Path, capsys: pytest.CaptureFixture) -> None:
