@@ -77,7 +77,9 @@ class IdentityBreakdown:
         return counts | {"people": [asdict(p) | {"ids": list(p.ids)} for p in self.people]}
 
 
-def identity_breakdown(gt_frames: Sequence[Frame], hyp_frames: Sequence[Frame], threshold_m: float = 0.5) -> IdentityBreakdown:
+def identity_breakdown(
+    gt_frames: Sequence[Frame], hyp_frames: Sequence[Frame], threshold_m: float = 0.5
+) -> IdentityBreakdown:
     """Each person's frames in ``gt_frames`` by the track of ``hyp_frames`` (the same instants,
     each an ``(ids, xy)`` pair) that followed them within ``threshold_m``."""
     if len(gt_frames) != len(hyp_frames):
@@ -91,7 +93,9 @@ def identity_breakdown(gt_frames: Sequence[Frame], hyp_frames: Sequence[Frame], 
     return IdentityBreakdown(person_frames=sum(p.frames for p in summaries), people=summaries, **counts)
 
 
-def _follow(gt_frames: Sequence[Frame], hyp_frames: Sequence[Frame], threshold_m: float) -> tuple[list[_PersonTrack], dict[int, list[tuple[int, int]]]]:
+def _follow(
+    gt_frames: Sequence[Frame], hyp_frames: Sequence[Frame], threshold_m: float
+) -> tuple[list[_PersonTrack], dict[int, list[tuple[int, int]]]]:
     """Each person's frames and the id that followed them in each, and for each id the (frame
     index, person) pairs it followed."""
     people: dict[int, _PersonTrack] = {}
@@ -112,6 +116,8 @@ def _follow(gt_frames: Sequence[Frame], hyp_frames: Sequence[Frame], threshold_m
 
 @dataclass(frozen=True)
 class _PersonTrack:
+    """One person's frames, gathered in order, and the id that followed them in each."""
+
     person: int
     ids: list[int]  # the id that followed them in each of their frames
     frames: list[int]  # those frames' indices
