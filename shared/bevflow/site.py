@@ -226,11 +226,13 @@ class Thresholds(_Strict):
         "(bevflow.tracking.hypotheses); 1 decides at every update. 20 holds identities better in a dense room "
         "(docs/RESULTS.md, CMC2). Past 2,000 tracks divided by this number (100 for 20) fewer are held, one from "
         "2,000 tracks, so that the work per update stays a few times that of deciding at once")
-    track_views: bool = Field(
-        default=False, description="true: the tracker takes each camera's views itself, at most one per camera and "
+    track_views: bool | None = Field(
+        default=None, description="true: the tracker takes each camera's views itself, at most one per camera and "
         "person, and fuses only the views no track took to find new people (bevflow.tracking.views); false fuses "
-        "every view first and tracks the fused people. Views held identities better with four side cameras in a "
-        "dense room, and left false tracks with ceiling fisheyes and the shipped detectors (docs/RESULTS.md)")
+        "every view first and tracks the fused people; null (the default) takes the views where every camera looks "
+        "more than 45 degrees away from straight down (side views) and fuses first otherwise. Views held identities "
+        "better with four side cameras in a dense room, and left false tracks with ceiling fisheyes and the shipped "
+        "detectors (docs/RESULTS.md)")
 
 
 class BusTls(_Strict):

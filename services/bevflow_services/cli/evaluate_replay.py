@@ -54,9 +54,14 @@ def add_replay_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--hypotheses", type=int, metavar="N",
                        help="hold N ways of matching tracks to people open for two seconds before deciding, instead of "
                        "the site's track_hypotheses (1: decide at every update)")
-    group.add_argument("--track-views", action="store_true",
-                       help="let each track take its views from every camera, and fuse only the views left over (the "
-                       "site's track_views true), instead of the site's own choice (by default, fusing every view first)")
+    mode = group.add_mutually_exclusive_group()
+    mode.add_argument("--track-views", action="store_true",
+                      help="let each track take its views from every camera, and fuse only the views left over (the "
+                      "site's track_views true), instead of the site's own choice (by default: views where every "
+                      "camera is a side view, else fused first)")
+    mode.add_argument("--fuse-first", action="store_true",
+                      help="fuse every view first and track the fused people (the site's track_views false), instead "
+                      "of the site's own choice")
     group.add_argument("--tracks-out", type=Path, metavar="FILE", help="write the online tracks as frame,id,x,y lines")
     perturbation = BoxPerturbation()
     group.add_argument("--perturb", type=int, default=0, metavar="N",
@@ -91,8 +96,8 @@ def run_replay(args: argparse.Namespace) -> tuple[ReplayEvaluation, dict[str, An
         raise UserError(str(exc)) from None
     if args.hypotheses is not None:
         site = with_hypotheses(site, args.hypotheses)
-    if args.track_views:
-        site = site.model_copy(update={"thresholds": site.thresholds.model_copy(update={"track_views": True})})
+    if args.track_views or args.fuse_first:
+        site = site.model_copy(update={"thresholds": site.thresholds.model_copy(update={"track_views": args.track_views})})
     area = parse_area(args.area, site)
     try:
         recording = read_detections(args.detections, {c.id: c.image_size for c in site.cameras})

@@ -136,7 +136,7 @@ def replay_tracking(
         raise ValueError(f"fps must be > 0, got {fps}")
     if not truth.frame_numbers:
         raise ValueError("the truth has no rows: nothing to score")
-    config = tracker or TrackerConfig.from_thresholds(site.thresholds)
+    config = tracker or TrackerConfig.from_thresholds(site.thresholds, [site.camera(c) for c in site.camera_ids])
     first_scored, last = truth.frame_numbers[0], truth.frame_numbers[-1]
     check_no_long_gap({**recording.frames_by_file(last), "the truth": truth.by_frame.keys()}, fps)
     first = min([first_scored, *recording.frame_numbers[:1]])

@@ -1,8 +1,8 @@
 """One step of the site's central stage: fuse the cameras' cylinders, track, analyse.
 
 The tracks follow the fused people, or take the cameras' views themselves where the site says so
-(``track_views``; ``bevflow.tracking.views``), and the fusion of the tick is then only what is
-reported of it (the fused people, the sightings).
+or, saying nothing, has side cameras only (``track_views``; ``bevflow.tracking.views``), and the
+fusion of the tick is then only what is reported of it (the fused people, the sightings).
 
 The tracker service calls ``SiteTracker.step`` once per tick (``bevflow.live.assembler``) and
 publishes what comes back as it is: the tracks, the occupancy and the events are wire messages.
@@ -58,7 +58,7 @@ class SiteTracker:
         self.site = site
         self.camera_ids = site.camera_ids
         self.cameras = [site.camera(c) for c in self.camera_ids]
-        config = tracker_config or TrackerConfig.from_thresholds(site.thresholds)
+        config = tracker_config or TrackerConfig.from_thresholds(site.thresholds, self.cameras)
         self.tracker = online_tracker(config, first_id, keep_final, fuse=self._fuse_left_over)
         self.analytics = SiteAnalytics(site)
         self._alone = [[c] for c in self.camera_ids]  # shared lists, read only: serialised as they are

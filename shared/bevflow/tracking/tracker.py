@@ -60,7 +60,7 @@ at 2 fps, where a coasting person has moved on by 0.6 m.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, fields, replace
 from typing import TYPE_CHECKING, Any
 
@@ -73,9 +73,10 @@ from bevflow.metrics.matching import assign_edges, gated_pairs
 from bevflow.metrics.ranked_matching import RankingMemo, ranked_matchings
 from bevflow.tracking.kalman import ConstantVelocityKalman, smooth
 from bevflow.tracking.stature import STATURE_DRIFT_M, fused_stature, stature_cost
-from bevflow.tracking.views import TENTATIVE_COST, fuse_views, leftover_cost, slot_rows
+from bevflow.tracking.views import TENTATIVE_COST, fuse_views, leftover_cost, side_views_only, slot_rows
 
-if TYPE_CHECKING:  # the tracker reads a site's thresholds but needs no site to run
+if TYPE_CHECKING:  # the tracker reads a site's thresholds and cameras but needs no site to run
+    from bevflow.camera import Camera
     from bevflow.site import Thresholds
 
 FloatArray = NDArray[np.float64]
@@ -104,7 +105,8 @@ class TrackerConfig:
       10 fps; 0.2 m also matches the paper's position error of fused cylinders (0.06–0.19 m).
     - ``shape_smoothing``: weight of a new measurement in the height and radius averages.
     - ``report_max_misses``: confirmed tracks missed in more consecutive updates than this are
-      kept but not returned by ``update`` (0 returns only tracks matched in this update).
+      kept but not returned by ``update`` (0 returns only tracks matched in this update; a site
+      whose tracks take the views gets 0, ``from_thresholds``).
     - ``confirm_multi_view``: a track born from a detection that several cameras agreed on
       (``Cylinders.camera == -1``) is confirmed at once: two views at one instant corroborate a
       person as well as a single view over ``activate_hits`` frames, and at 2 fps waiting costs a
@@ -145,7 +147,9 @@ class TrackerConfig:
       the tracker's ``fuse``) to start tracks outside the gate of every track that took a view
       (``bevflow.tracking.views``). Weak views are matched with the strong ones in one pass (they
       still start nothing); a confirmed track that took no view may then take a strong one left
-      over within ``lost_speed_mps``, as in the other mode. Needs ``gate_chi2``.
+      over within ``lost_speed_mps``, as in the other mode. Needs ``gate_chi2``. A site that
+      leaves its ``track_views`` unset takes views where every camera is a side view
+      (``from_thresholds``).
     """
 
     gate_m: float = 1.5
@@ -191,16 +195,21 @@ class TrackerConfig:
             raise ValueError(f"TrackerConfig.shape_smoothing must be in [0, 1], got {self.shape_smoothing}")
 
     @classmethod
-    def from_thresholds(cls, thresholds: Thresholds, **overrides: Any) -> TrackerConfig:
+    def from_thresholds(cls, thresholds: Thresholds, cameras: Sequence[Camera] = (), **overrides: Any) -> TrackerConfig:
         """Settings from a site's ``Thresholds`` (track_gate_m, track_activate_hits,
-        track_max_misses, track_hypotheses, track_views); ``overrides`` set any other field
-        (checked as the fields are)."""
+        track_max_misses, track_hypotheses, track_views) and its ``cameras``: where track_views is
+        unset, the tracks take the views when every camera is a side view
+        (``bevflow.tracking.views.side_views_only``). With views a track that took none is seen by
+        no camera, so it is not reported while it coasts (``report_max_misses`` 0). ``overrides``
+        set any other field (checked as the fields are)."""
+        views = side_views_only(cameras) if thresholds.track_views is None else thresholds.track_views
         site = cls(
             gate_m=thresholds.track_gate_m,
             activate_hits=thresholds.track_activate_hits,
             max_misses=thresholds.track_max_misses,
             hypotheses=thresholds.track_hypotheses,
-            track_views=thresholds.track_views,
+            track_views=views,
+            report_max_misses=0 if views else cls.report_max_misses,
         )
         return replace(site, **overrides)
 

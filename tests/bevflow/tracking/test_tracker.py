@@ -6,11 +6,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from bevflow.camera import Camera
 from bevflow.detections import Cylinders
 from bevflow.metrics.matching import match_positions
 from bevflow.metrics.tracking import score_tracking
 from bevflow.site import Thresholds
 from bevflow.tracking.tracker import Tracker, TrackerConfig, TrackTable
+from tests.bevflow.tracking.test_views import CEILING, side_camera
 
 
 def _run(tracker: Tracker, frames: list[Cylinders], times: list[float]) -> list[TrackTable]:
@@ -327,6 +329,27 @@ def test_config_from_site_thresholds() -> None:
     config = TrackerConfig.from_thresholds(thresholds, weak_score=0.4)
     assert (config.activate_hits, config.max_misses, config.gate_m, config.weak_score) == (4, 7, 2.0, 0.4)
     assert config.track_views and not TrackerConfig.from_thresholds(Thresholds()).track_views
+
+
+SIDE = [side_camera(63, yaw) for yaw in (0, 120, 240)]
+
+
+@pytest.mark.parametrize(
+    ("track_views", "cameras", "views", "coasting_reported"),
+    [
+        pytest.param(None, SIDE, True, 0, id="unset, side cameras: views"),
+        pytest.param(None, [CEILING], False, 1, id="unset, a ceiling camera: fused first"),
+        pytest.param(None, [*SIDE, CEILING], False, 1, id="unset, side and ceiling: fused first"),
+        pytest.param(False, SIDE, False, 1, id="false wins over side cameras"),
+        pytest.param(True, [CEILING], True, 0, id="true wins over a ceiling camera"),
+    ],
+)
+def test_config_takes_views_by_the_cameras_unless_the_site_says(
+    track_views: bool | None, cameras: list[Camera], views: bool, coasting_reported: int
+) -> None:
+    config = TrackerConfig.from_thresholds(Thresholds(track_views=track_views), cameras)
+    assert (config.track_views, config.report_max_misses) == (views, coasting_reported)
+    assert TrackerConfig.from_thresholds(Thresholds(track_views=track_views), cameras, report_max_misses=2).report_max_misses == 2
 
 
 # --- a crowd --------------------------------------------------------------------------------

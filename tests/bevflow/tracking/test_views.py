@@ -6,11 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from bevflow.camera import Camera, FisheyeCamera, PinholeCamera, rotation_from_ypr
 from bevflow.detections import Cylinders
 from bevflow.metrics.tracking import score_tracking
 from bevflow.tracking.hypotheses import online_tracker
 from bevflow.tracking.tracker import Tracker, TrackerConfig
-from bevflow.tracking.views import LEFTOVER_LOG_DET, fuse_views, leftover_cost, slot_rows
+from bevflow.tracking.views import LEFTOVER_LOG_DET, fuse_views, leftover_cost, side_views_only, slot_rows
 
 
 def _along(axis: int, long_m: float = 0.5, short_m: float = 0.05) -> np.ndarray:
@@ -135,3 +136,28 @@ def _fuse_nearby(views: Cylinders) -> Cylinders:
         people.append(views.xy[group].mean(axis=0))
         left &= ~group
     return Cylinders(xy=np.array(people).reshape(-1, 2), camera=np.full(len(people), -1), score=np.ones(len(people)))
+
+
+def side_camera(tilt_deg: float, yaw_deg: float = 0.0) -> PinholeCamera:
+    """A pinhole 3 m up whose optical axis lies ``tilt_deg`` from straight down."""
+    rotation = rotation_from_ypr(yaw_deg, tilt_deg, 0.0)
+    return PinholeCamera(K=np.array([[800.0, 0.0, 640.0], [0.0, 800.0, 360.0], [0.0, 0.0, 1.0]]), R=rotation,
+                         t=-rotation @ np.array([0.0, 0.0, 3.0]), dist=np.zeros(5), image_size=(1280, 720))  # fmt: skip
+
+
+CEILING = FisheyeCamera.looking_down(position=(0.0, 0.0, 3.3), image_size=(1024, 1024))
+
+
+@pytest.mark.parametrize(
+    ("cameras", "side"),
+    [
+        pytest.param([side_camera(63, yaw) for yaw in (0, 90, 180, 270)], True, id="four side cameras (CMC2)"),
+        pytest.param([side_camera(46)], True, id="just past 45 degrees"),
+        pytest.param([side_camera(44)], False, id="just short of 45 degrees"),
+        pytest.param([CEILING], False, id="a ceiling fisheye"),
+        pytest.param([side_camera(70), CEILING], False, id="side and ceiling cameras"),
+        pytest.param([], False, id="no cameras"),
+    ],
+)
+def test_a_site_takes_views_where_every_camera_is_a_side_view(cameras: list[Camera], side: bool) -> None:
+    assert side_views_only(cameras) is side

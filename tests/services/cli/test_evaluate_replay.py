@@ -85,14 +85,29 @@ def test_hypotheses_override_the_sites_and_are_named(recording: Path, capsys: py
     assert json.loads(out.read_text())["tracker"]["hypotheses"] == 1 and "hypotheses" not in capsys.readouterr().out
 
 
-def test_track_views_lets_the_tracks_take_the_views_and_says_so(recording: Path, capsys: pytest.CaptureFixture) -> None:
+@pytest.mark.parametrize(
+    ("option", "views"),
+    [
+        pytest.param(None, True, id="the site's default: WILDTRACK's side cameras take views"),
+        pytest.param("--fuse-first", False, id="fused first"),
+        pytest.param("--track-views", True, id="views"),
+    ],
+)
+def test_the_tracks_take_the_views_or_the_fused_people_and_say_which(
+    recording: Path, capsys: pytest.CaptureFixture, option: str | None, views: bool
+) -> None:
     out = recording / "scores.json"
-    assert main(args(recording, "--json", str(out))) == 0  # the site's default: views fused first
-    assert json.loads(out.read_text())["tracker"]["track_views"] is False
-    assert "views fused before tracking" in capsys.readouterr().out
-    assert main(args(recording, "--track-views", "--json", str(out))) == 0
-    assert json.loads(out.read_text())["tracker"]["track_views"] is True
-    assert "each camera's views matched to the tracks" in capsys.readouterr().out
+    assert main(args(recording, *([option] if option else []), "--json", str(out))) == 0
+    tracker = json.loads(out.read_text())["tracker"]
+    assert (tracker["track_views"], tracker["report_max_misses"]) == (views, 0 if views else 1)
+    said = "each camera's views matched to the tracks" if views else "views fused before tracking"
+    assert said in capsys.readouterr().out
+
+
+def test_track_views_and_fuse_first_together_are_refused(recording: Path, capsys: pytest.CaptureFixture) -> None:
+    with pytest.raises(SystemExit):
+        main(args(recording, "--track-views", "--fuse-first"))
+    assert "not allowed with argument" in capsys.readouterr().err
 
 
 def test_the_area_leaves_out_unmatched_tracks_beyond_it(recording: Path, tmp_path: Path) -> None:
