@@ -175,7 +175,8 @@ def format_replay(r: ReplayEvaluation, site: Site) -> str:
             f"{c.activate_hits} hits to confirm, {c.max_misses} misses to drop, gate {c.gate_m:g} m"
             + ("" if c.gate_chi2 is None else f" and chi2 {c.gate_chi2:g} of the prediction")
             + ("" if c.hypotheses == 1 else f", {c.hypotheses} hypotheses over {c.hypothesis_window_s:g} s")
-            + (", each camera's views matched to the tracks" if c.track_views else ", views fused before tracking"))
+            + (", each camera's views matched to the tracks" if c.track_views else ", views fused before tracking")
+            + (" (every camera looks from the side)" if c.track_views and site.thresholds.track_views is None else ""))
     columns = f"{'':<9} {'MODA':>6} {'MOTA':>6} {'IDF1':>6} {'HOTA':>6} {'DetA':>6} {'AssA':>6} {'IDSW':>5} {'prec':>6} {'recall':>6} {'APE m':>6} {'frames':>6}"
     rows = [head, columns]
     for name, s, h in (("online", r.scores, r.hota), ("settled", r.settled, r.settled_hota)):
