@@ -61,6 +61,13 @@ def rotation_vector(R: ArrayLike) -> Array:
     return np.asarray(cv2.Rodrigues(np.asarray(R, dtype=np.float64))[0], dtype=np.float64).ravel()
 
 
+def tilt_deg(R: ArrayLike) -> float:
+    """Angle between the optical axis of a camera with world-to-camera rotation ``R`` and straight
+    down, degrees (0: looking straight down, 90: level). The axis in the world is Rᵀ (0, 0, 1)."""
+    axis_in_world = np.asarray(R, dtype=np.float64).T @ np.array([0.0, 0.0, 1.0])
+    return math.degrees(math.acos(float(np.clip(-axis_in_world[2], -1.0, 1.0))))
+
+
 def _rot_z(a: float) -> Array:
     c, s = math.cos(a), math.sin(a)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
@@ -101,6 +108,11 @@ class Camera:
     @property
     def rvec(self) -> Array:
         return rotation_vector(self.R)
+
+    @property
+    def tilt_deg(self) -> float:
+        """Angle between the optical axis and straight down (``tilt_deg``)."""
+        return tilt_deg(self.R)
 
     def world_to_camera(self, points: Array) -> Array:
         return np.asarray(points, dtype=np.float64) @ self.R.T + self.t

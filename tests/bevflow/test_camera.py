@@ -421,3 +421,14 @@ def test_camera_arrays_are_read_only() -> None:
 
 def test_docstring_examples() -> None:
     assert doctest.testmod(bevflow.camera).failed == 0
+
+
+@pytest.mark.parametrize(
+    ("ypr", "tilt"),
+    [((0.0, 0.0, 0.0), 0.0), ((30.0, 63.0, 0.0), 63.0), ((200.0, 90.0, 10.0), 90.0), ((0.0, 120.0, 0.0), 120.0)],
+    ids=["straight down", "a side camera", "level", "looking up"],
+)
+def test_tilt_is_the_optical_axis_angle_from_straight_down(ypr: tuple[float, float, float], tilt: float) -> None:
+    R = rotation_from_ypr(*ypr)
+    camera = PinholeCamera(K=np.eye(3), R=R, t=np.zeros(3), dist=np.zeros(5), image_size=(640, 480))
+    assert camera.tilt_deg == pytest.approx(tilt) == bevflow.camera.tilt_deg(R)

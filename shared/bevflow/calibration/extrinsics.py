@@ -40,7 +40,7 @@ import yaml
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
-from bevflow.camera import Camera, rotation_from_vector, rotation_vector
+from bevflow.camera import Camera, rotation_from_vector, rotation_vector, tilt_deg
 
 Array = NDArray[np.float64]
 
@@ -85,9 +85,8 @@ class PoseFit:
 
     @property
     def tilt_deg(self) -> float:
-        """Angle between the optical axis and straight down."""
-        axis_in_world = self.R.T @ np.array([0.0, 0.0, 1.0])
-        return math.degrees(math.acos(float(np.clip(-axis_in_world[2], -1.0, 1.0))))
+        """Angle between the optical axis and straight down (``bevflow.camera.tilt_deg``)."""
+        return tilt_deg(self.R)
 
     @property
     def rms_px(self) -> float:

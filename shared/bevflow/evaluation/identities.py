@@ -31,11 +31,9 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from bevflow.metrics.matching import match_positions
-
-Frame = tuple[NDArray[np.int64], NDArray[np.float64]]
+from bevflow.metrics.tracking import Frame
 
 FLICKER_FRAMES = 3
 SHORT_FRAMES = 10

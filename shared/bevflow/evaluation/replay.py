@@ -136,13 +136,14 @@ def replay_tracking(
         raise ValueError(f"fps must be > 0, got {fps}")
     if not truth.frame_numbers:
         raise ValueError("the truth has no rows: nothing to score")
-    config = tracker or TrackerConfig.from_thresholds(site.thresholds, [site.camera(c) for c in site.camera_ids])
+    site_cameras = [site.camera(c) for c in site.camera_ids]
+    config = tracker or TrackerConfig.from_thresholds(site.thresholds, site_cameras)
     first_scored, last = truth.frame_numbers[0], truth.frame_numbers[-1]
     check_no_long_gap({**recording.frames_by_file(last), "the truth": truth.by_frame.keys()}, fps)
     first = min([first_scored, *recording.frame_numbers[:1]])
     run = _Run(site, config, area, threshold_m)
     projection = CameraProjection(site)
-    cameras = CameraErrorSamples(site.camera_ids, [site.camera(c) for c in site.camera_ids], truth, fps, threshold_m)
+    cameras = CameraErrorSamples(site.camera_ids, site_cameras, truth, fps, threshold_m)
     for frame in range(first, last + 1):
         per_camera = {c.camera_id: projection.project(c.camera_id, boxes) for c in recording.cameras
                       if len(boxes := c.boxes(frame, min_confidence))}

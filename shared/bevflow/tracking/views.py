@@ -71,7 +71,6 @@ EPYC: a tick for 100 people on 4 / 16 / 64 cameras took 35 / 28 / 23 ms with vie
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
@@ -108,9 +107,7 @@ def side_views_only(cameras: Sequence[Camera]) -> bool:
     leaves ``track_views`` unset takes views (module docstring). False for no cameras."""
     if not cameras:
         return False
-    steepest = math.cos(math.radians(SIDE_VIEW_DEG))
-    # The optical axis in the world is R^T (0, 0, 1); minus its Z is the cosine of its angle from straight down.
-    return all(float(-(camera.R.T @ np.array([0.0, 0.0, 1.0]))[2]) < steepest for camera in cameras)
+    return all(camera.tilt_deg > SIDE_VIEW_DEG for camera in cameras)
 
 
 def leftover_cost(gate_chi2: float) -> float:

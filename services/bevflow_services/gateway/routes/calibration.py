@@ -203,13 +203,12 @@ def calibration_site(site: CurrentSiteDep, site_file: SiteFileDep, inputs: Input
     cameras = []
     for config in site.cameras:
         camera = site.camera(config.id)
-        axis = camera.R.T @ np.array([0.0, 0.0, 1.0])
         cameras.append(CalibrationCamera(
             id=config.id,
             model=config.model,
             image_size=config.image_size,
             position=tuple(float(v) for v in camera.center),  # type: ignore[arg-type]
-            tilt_deg=float(np.degrees(np.arccos(np.clip(-axis[2], -1.0, 1.0)))),
+            tilt_deg=camera.tilt_deg,
             monitored_radius_m=config.monitored_radius_m,
             coverage_radius_m=_coverage_radius(config.monitored_radius_m, config.model, float(camera.center[2])),
             frame="live" if inputs.latest_frame(config.id, fetch=False) is not None else "rendered",
